@@ -1,0 +1,1 @@
+"""The FastAPI service: uploads, jobs, results, coach review, REST API for clubs."""

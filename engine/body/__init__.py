@@ -1,0 +1,1 @@
+"""The body model: skeleton tables, kinematics, part shapes, retargeting."""

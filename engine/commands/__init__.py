@@ -1,0 +1,1 @@
+"""One module per `coach` subcommand: ``register(subparsers)`` and ``run(args)``."""

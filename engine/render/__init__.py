@@ -1,0 +1,1 @@
+"""Renderers: the camera, the fast capsule rasteriser and the pyrender mesh renderer."""
