@@ -1,0 +1,89 @@
+"""Joint-angle limits of the 17-joint body (thesis appendix A, table A.1).
+
+The limit of a joint is on the angle *at* that joint between the bone towards its parent and
+the bone towards its child (180 deg = straight, e.g. a straight knee); table A.1 gives the
+smallest allowed angle, e.g. 35 deg for a knee, so a knee folded tighter than that is
+impossible. The table itself is :data:`engine.body.skeleton.JOINT_LIMITS` (11 limited joints,
+:data:`~engine.body.skeleton.LIMIT_JOINT` order); the end effectors and the root have none.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from engine.body.skeleton import LIMIT_A, LIMIT_B, LIMIT_JOINT, LIMIT_MIN_RAD
+from engine.errors import InvalidInput
+
+
+def _check(joints: np.ndarray) -> np.ndarray:
+    j = np.asarray(joints, dtype=float)
+    if j.ndim < 2 or j.shape[-2:] != (17, 3):
+        raise InvalidInput(f"joints must have shape (..., 17, 3), got {j.shape}")
+    return j
+
+
+def joint_angles(joints: np.ndarray) -> np.ndarray:
+    """Angle at each limited joint between its parent-side and child-side bones.
+
+    Parameters
+    ----------
+    joints : ndarray, shape (..., 17, 3)
+
+    Returns
+    -------
+    angles : ndarray, shape (..., 11)
+        Radians in [0, pi], in :data:`~engine.body.skeleton.JOINT_LIMITS` order
+        (thesis table A.1: alpha_ij between connected bones).
+
+    Raises
+    ------
+    InvalidInput
+        When ``joints`` is not (..., 17, 3).
+    """
+    j = _check(joints)
+    a = j[..., LIMIT_A, :] - j[..., LIMIT_JOINT, :]
+    b = j[..., LIMIT_B, :] - j[..., LIMIT_JOINT, :]
+    na = np.linalg.norm(a, axis=-1)
+    nb = np.linalg.norm(b, axis=-1)
+    cos = np.sum(a * b, axis=-1) / np.maximum(na * nb, 1e-12)
+    return np.arccos(np.clip(cos, -1.0, 1.0))
+
+
+def limit_violations(joints: np.ndarray, *, margin_rad: float = 0.0) -> np.ndarray:
+    """Which joint-angle limits (appendix A) a posture breaks.
+
+    Parameters
+    ----------
+    joints : ndarray, shape (..., 17, 3)
+    margin_rad : float
+        Tolerance: a limit is broken only when the angle is below ``min - margin_rad``
+        (useful for noisy measured postures).
+
+    Returns
+    -------
+    violated : ndarray of bool, shape (..., 11)
+
+    Raises
+    ------
+    InvalidInput
+        When ``joints`` is not (..., 17, 3) or ``margin_rad`` is negative or not finite.
+    """
+    if not np.isfinite(margin_rad) or margin_rad < 0:
+        raise InvalidInput(f"margin_rad must be a non-negative number, got {margin_rad!r}")
+    return joint_angles(joints) < LIMIT_MIN_RAD - margin_rad
+
+
+def within_limits(joints: np.ndarray, *, margin_rad: float = 0.0) -> np.ndarray:
+    """Whether postures respect every joint-angle limit (appendix A).
+
+    Parameters
+    ----------
+    joints : ndarray, shape (..., 17, 3)
+    margin_rad : float
+        See :func:`limit_violations`.
+
+    Returns
+    -------
+    ok : ndarray of bool, shape (...)
+    """
+    return ~np.any(limit_violations(joints, margin_rad=margin_rad), axis=-1)
