@@ -13,7 +13,7 @@ from the expert:
 - a fixed scaled orthographic camera (2.1.3 item 1) framing the body at ~80 % of the image
   height, a textured static background and Gaussian sensor noise.
 
-The reference at the fractional frame C(t') is :func:`engine.io.bvh.sample_at` (slerp of part
+The reference at the fractional frame C(t') is :func:`engine.io.bvh.sample_reference` (slerp of the file's local
 rotations), the same sampling the truth's bone errors are measured against. Every random
 choice comes from the ``rng`` passed in.
 """
@@ -395,7 +395,7 @@ def synthesize(
     InvalidInput
         A reference that is too short, segments outside it, fps above the reference's.
     """
-    from engine.io.bvh import sample_at
+    from engine.io.bvh import sample_at, sample_reference
     from engine.render.mesh import MeshRenderer, textured_background
 
     motion, shape = reference.motion, reference.shape
@@ -421,7 +421,12 @@ def synthesize(
     truncated = settings.max_frames is not None and len(warp) > settings.max_frames
     if truncated:
         warp = warp[: settings.max_frames]
-    ref = sample_at(motion, shape, warp)  # (T', 17, 3)
+    # the file's own rotations interpolated, as the public truth does (rigid-part slerp
+    # would bend CMU's spine and hips by up to 20 deg)
+    if getattr(reference, "bvh", None) is not None:
+        ref = sample_reference(reference, warp)  # (T', 17, 3)
+    else:  # a reference built in memory (no file): interpolate on the 17-joint body
+        ref = sample_at(motion, shape, warp)
 
     # table 2.1: which segments are wrong, and how
     n_seg = len(segments.starts)
@@ -551,7 +556,7 @@ def _truth(
         f"about their root joints (smooth ramp {settings.ramp:g} of the segment), yaw "
         f"{settings.yaw_deg:g} deg. World frame = the reference's (metres, y up, facing +z at "
         f"reference frame 0). reference_frame = true fractional C(t'); bone_errors_deg = "
-        f"angle to the reference sampled at that frame (engine.io.bvh.sample_at, slerp). "
+        f"angle to the reference sampled at that frame (engine.io.bvh.sample_reference, slerp of the file's rotations). "
         f"joints_2d = exact projection of joints_3d by the camera (pixel centres on integers). "
         f"Video frame 0 is pinned to reference frame {bounds[0]} (the first motion frame)."
     )
