@@ -1,0 +1,348 @@
+"""The registration pipeline (thesis chapter 4) as three resumable steps and one call.
+
+    prepare     stages 0-2: foreground, calibration, approximate alignment (4.1, 4.2, 4.5)
+    candidates  stage 3 on a range of video frames (4.6): independent across chunks given
+                prepare's output, so workers can fan chunks out
+    select      stage 4 (4.7): boundaries, selection, refined C, errors -> the result JSON
+    analyze     all of it in one process
+
+Each step's output is a small object that saves to one file (:mod:`engine.io.stagefiles`),
+so a service can store it in the analysis folder and skip the step when it is redone.
+Progress goes out through ``on_progress(stage, fraction)``; nothing here knows who listens.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from engine.body.shapes import BodyShape
+from engine.errors import InvalidInput
+from engine.io.stagefiles import load_arrays, pack_masks, save_arrays, unpack_masks
+from engine.render.camera import Camera
+from engine.settings import Settings
+from engine.types import Segments
+
+ProgressFn = Callable[[str, float], None]
+PathLike = str | os.PathLike
+
+
+def _settings(settings: Settings | dict | None) -> Settings:
+    if isinstance(settings, Settings):
+        return settings
+    return Settings.from_dict(settings)
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """Output of stages 0-2 and everything later stages need, without re-reading files.
+
+    Attributes
+    ----------
+    reference_path, video_path : str
+    reference_name : str
+    reference_fps : float
+    first_motion_frame : int
+        Reference frame the motion starts at (1 after a conversion T-pose).
+    reference_joints : ndarray, shape (T, 17, 3)
+        Every frame of the BVH as given (frame numbers count the file's frames).
+    shape : BodyShape
+    video : dict
+        ``frames``, ``fps``, ``width``, ``height`` (working resolution), ``original_width``,
+        ``original_height``.
+    camera : Camera
+    silhouettes, edges : ndarray of bool, shape (T', H, W)
+    C : ndarray of int, shape (T',)
+        Approximate correspondence (reference frame per video frame).
+    rotations : ndarray, shape (T', 3, 3)
+        Global rotation T_t' about the hip.
+    segments : Segments
+        Reference segments, in the file's frame numbers.
+    flags : tuple of tuple of str
+        Stage-0 quality flags per video frame.
+    timing_s : dict
+    """
+
+    reference_path: str
+    video_path: str
+    reference_name: str
+    reference_fps: float
+    first_motion_frame: int
+    reference_joints: np.ndarray
+    shape: BodyShape
+    video: dict
+    camera: Camera
+    silhouettes: np.ndarray
+    edges: np.ndarray
+    C: np.ndarray
+    rotations: np.ndarray
+    segments: Segments
+    flags: tuple[tuple[str, ...], ...]
+    timing_s: dict
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.C.shape[0])
+
+    def chunks(self, n_chunks: int) -> list[range]:
+        """Split the video frames into at most ``n_chunks`` contiguous ranges."""
+        if n_chunks < 1:
+            raise InvalidInput(f"n_chunks must be >= 1, got {n_chunks}")
+        edges = np.linspace(0, self.n_frames, min(n_chunks, self.n_frames) + 1).round()
+        return [range(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:], strict=True)]
+
+    def initial_postures(self, frames: range) -> np.ndarray:
+        """B_C(t') turned by T_t' about the hip (thesis 4.6.4 initial estimate), (N, 17, 3)."""
+        idx = np.asarray(frames)
+        ref = self.reference_joints[self.C[idx]]
+        hip = ref[:, :1]
+        return np.einsum("nij,nkj->nki", self.rotations[idx], ref - hip) + hip
+
+    def save(self, path: PathLike) -> None:
+        sil, sil_shape = pack_masks(self.silhouettes)
+        edg, _ = pack_masks(self.edges)
+        arrays = {
+            "reference_joints": self.reference_joints, "offsets": self.shape.offsets,
+            "radii": self.shape.radii, "silhouettes": sil, "edges": edg, "C": self.C,
+            "rotations": self.rotations,
+        }  # fmt: skip
+        meta = {
+            "reference_path": self.reference_path, "video_path": self.video_path,
+            "reference_name": self.reference_name, "reference_fps": self.reference_fps,
+            "first_motion_frame": self.first_motion_frame, "video": self.video,
+            "camera": self.camera.to_dict(), "mask_shape": list(sil_shape),
+            "segments": {"starts": list(self.segments.starts), "end": self.segments.end,
+                         "names": list(self.segments.names)},
+            "flags": [list(f) for f in self.flags], "timing_s": self.timing_s,
+        }  # fmt: skip
+        save_arrays(path, arrays, meta)
+
+    @classmethod
+    def load(cls, path: PathLike) -> Prepared:
+        a, m = load_arrays(path)
+        shape = tuple(m["mask_shape"])
+        seg = m["segments"]
+        return cls(
+            reference_path=m["reference_path"], video_path=m["video_path"],
+            reference_name=m["reference_name"], reference_fps=float(m["reference_fps"]),
+            first_motion_frame=int(m["first_motion_frame"]),
+            reference_joints=a["reference_joints"],
+            shape=BodyShape(offsets=a["offsets"], radii=a["radii"]), video=m["video"],
+            camera=Camera.from_dict(m["camera"]),
+            silhouettes=unpack_masks(a["silhouettes"], shape),
+            edges=unpack_masks(a["edges"], shape), C=a["C"], rotations=a["rotations"],
+            segments=Segments(tuple(seg["starts"]), int(seg["end"]), tuple(seg["names"])),
+            flags=tuple(tuple(f) for f in m["flags"]), timing_s=m["timing_s"],
+        )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class CandidateChunk:
+    """Stage-3 output for a range of video frames.
+
+    Attributes
+    ----------
+    frames : ndarray of int, shape (N,)
+    candidates : list of ndarray, shape (K_t', 17, 3) each
+    d_s : list of ndarray, shape (K_t',) each
+    flags : tuple of tuple of str
+    seconds : float
+    """
+
+    frames: np.ndarray
+    candidates: list[np.ndarray]
+    d_s: list[np.ndarray]
+    flags: tuple[tuple[str, ...], ...]
+    seconds: float
+
+    def save(self, path: PathLike) -> None:
+        counts = np.array([len(c) for c in self.candidates])
+        arrays = {
+            "frames": self.frames, "counts": counts,
+            "candidates": np.concatenate(self.candidates) if self.candidates else np.zeros((0, 17, 3)),
+            "d_s": np.concatenate(self.d_s) if self.d_s else np.zeros(0),
+        }  # fmt: skip
+        save_arrays(path, arrays, {"flags": [list(f) for f in self.flags], "seconds": self.seconds})
+
+    @classmethod
+    def load(cls, path: PathLike) -> CandidateChunk:
+        a, m = load_arrays(path)
+        split = np.cumsum(a["counts"])[:-1]
+        return cls(
+            frames=a["frames"], candidates=np.split(a["candidates"], split),
+            d_s=np.split(a["d_s"], split), flags=tuple(tuple(f) for f in m["flags"]),
+            seconds=float(m["seconds"]),
+        )  # fmt: skip
+
+
+def _reference_segments(reference: Any, reference_path: PathLike) -> Segments:
+    """Reference boundaries (thesis 2.1.1 item 4), named and tuned by the domain file (6.8)."""
+    from engine.reference.boundaries import reference_boundaries
+    from engine.reference.domain import find_domain
+
+    domain = find_domain(reference_path)
+    kw: dict[str, Any] = {}
+    if domain is not None and domain.boundary_joints:
+        kw["joint"] = domain.boundary_joints[0]
+    if domain is not None and domain.direction_change_deg is not None:
+        kw["threshold_deg"] = domain.direction_change_deg
+    segs = reference_boundaries(reference.motion, **kw)
+    if domain is not None and len(domain.segment_names) == len(segs.starts):
+        segs = Segments(segs.starts, segs.end, domain.segment_names)
+    return segs
+
+
+def prepare(
+    reference_path: PathLike,
+    video_path: PathLike,
+    settings: Settings | dict | None = None,
+    *,
+    on_progress: ProgressFn | None = None,
+) -> Prepared:
+    """Stages 0-2 (thesis 4.1, 4.2, 4.5) from files.
+
+    Raises
+    ------
+    InvalidInput
+        Unreadable/unmappable BVH, unreadable or over-limit video, bad settings.
+    RegistrationFailed
+        No usable camera or body region.
+    """
+    from engine.io.bvh import load_reference
+    from engine.io.video import read_video
+    from engine.stages import run_stages_0_2
+
+    s = _settings(settings)
+    t0 = time.perf_counter()
+    reference = load_reference(reference_path)
+    video = read_video(video_path, height=s.working_height, limits=s.video)
+    segments = _reference_segments(reference, reference_path)
+    load_s = time.perf_counter() - t0
+    fg, camera, aligned, timing = run_stages_0_2(
+        reference, video, s.foreground, s.calibration, s.alignment, on_progress=on_progress
+    )
+    h, w = video.frames.shape[1:3]
+    return Prepared(
+        reference_path=str(reference_path), video_path=str(video_path),
+        reference_name=reference.motion.name or os.path.basename(str(reference_path)),
+        reference_fps=float(reference.motion.fps),
+        first_motion_frame=int(reference.motion.first_motion_frame),
+        reference_joints=reference.motion.joints, shape=reference.shape,
+        video={"frames": int(video.n_frames), "fps": float(video.fps), "width": int(w),
+               "height": int(h), "original_width": int(video.original_width),
+               "original_height": int(video.original_height)},
+        camera=camera, silhouettes=fg.silhouettes, edges=fg.edges,
+        C=np.asarray(aligned.C, dtype=int), rotations=np.asarray(aligned.rotations, float),
+        segments=segments, flags=tuple(tuple(f) for f in fg.flags),
+        timing_s={"load": load_s, **{k: float(v) for k, v in timing.items()}},
+    )  # fmt: skip
+
+
+def candidates(
+    prepared: Prepared,
+    frames: range | None = None,
+    settings: Settings | dict | None = None,
+    *,
+    on_progress: ProgressFn | None = None,
+) -> CandidateChunk:
+    """Stage 3 (thesis 4.6) on ``frames`` (all by default).
+
+    The random stream depends only on the seed and the chunk's first frame, so the same
+    chunking gives the same candidates on any worker, in any order.
+    """
+    from engine.stages.candidates import estimate_candidates_chunk
+
+    s = _settings(settings)
+    frames = range(prepared.n_frames) if frames is None else frames
+    if len(frames) == 0 or frames.start < 0 or frames.stop > prepared.n_frames:
+        raise InvalidInput(f"frames must be a non-empty range within 0..{prepared.n_frames}")
+    idx = np.asarray(frames)
+    t0 = time.perf_counter()
+    out = estimate_candidates_chunk(
+        prepared.silhouettes[idx], prepared.edges[idx], prepared.camera, prepared.shape,
+        prepared.initial_postures(frames), settings=s.candidates,
+        rng=np.random.default_rng([s.seed, frames.start]), on_progress=on_progress,
+    )  # fmt: skip
+    return CandidateChunk(
+        frames=idx, candidates=[f.candidates for f in out], d_s=[f.d_s for f in out],
+        flags=tuple(tuple(prepared.flags[t]) + tuple(f.flags) for t, f in zip(idx, out)),
+        seconds=time.perf_counter() - t0,
+    )  # fmt: skip
+
+
+def select(
+    prepared: Prepared,
+    chunks: Sequence[CandidateChunk],
+    settings: Settings | dict | None = None,
+    *,
+    on_progress: ProgressFn | None = None,
+) -> dict:
+    """Stage 4 (thesis 4.7) over all chunks -> the DESIGN.md result document."""
+    from engine.io.result import build_result
+    from engine.reference.domain import find_domain
+    from engine.stages.selection import select_and_refine
+
+    s = _settings(settings)
+    order = sorted(chunks, key=lambda c: int(c.frames[0]))
+    frames = np.concatenate([c.frames for c in order])
+    if not np.array_equal(frames, np.arange(prepared.n_frames)):
+        raise InvalidInput("candidate chunks must cover every video frame exactly once")
+    cands = [k for c in order for k in c.candidates]
+    flags = [f for c in order for f in c.flags]
+    t0 = time.perf_counter()
+    selection = select_and_refine(
+        cands, prepared.reference_joints, prepared.segments, prepared.C.astype(float),
+        settings=s.selection, fps_ratio=prepared.reference_fps / prepared.video["fps"],
+        candidate_flags=flags, on_progress=on_progress,
+    )  # fmt: skip
+    timing = dict(prepared.timing_s)
+    timing["candidates"] = float(sum(c.seconds for c in order))
+    timing["selection"] = time.perf_counter() - t0
+    timing["total"] = float(sum(timing.values()))
+    v = prepared.video
+    return build_result(
+        reference_name=prepared.reference_name,
+        reference_frames=int(prepared.reference_joints.shape[0]),
+        reference_fps=prepared.reference_fps,
+        video={"frames": v["frames"], "fps": v["fps"], "width": v["original_width"],
+               "height": v["original_height"]},
+        camera=original_pixels(prepared.camera, v["original_width"], v["original_height"]),
+        selection=selection, candidates=cands, timing_s=timing,
+        domain=find_domain(prepared.reference_path),
+    )  # fmt: skip
+
+
+def original_pixels(camera: Camera, width: int, height: int) -> Camera:
+    """The working-resolution camera re-expressed in the video file's own pixels.
+
+    Pixel centres sit on integers at both resolutions, so u_file = (u_work + 0.5) / k - 0.5.
+    """
+    k = camera.height / height
+    if abs(k - 1.0) < 1e-12:
+        return camera
+    return Camera(
+        scale=camera.scale / k, theta_z=camera.theta_z, cx=(camera.cx + 0.5) / k - 0.5,
+        cy=(camera.cy + 0.5) / k - 0.5, azimuth=camera.azimuth, width=width, height=height,
+    )
+
+
+def analyze(
+    reference_path: PathLike,
+    video_path: PathLike,
+    settings: Settings | dict | None = None,
+    *,
+    on_progress: ProgressFn | None = None,
+) -> dict:
+    """The whole registration (thesis chapter 4) in this process -> the result document."""
+    s = _settings(settings)
+    prepared = prepare(reference_path, video_path, s, on_progress=on_progress)
+    chunks = [
+        candidates(prepared, r, s, on_progress=on_progress)
+        for r in prepared.chunks(max(1, -(-prepared.n_frames // s.chunk_frames)))
+    ]
+    return select(prepared, chunks, s, on_progress=on_progress)
