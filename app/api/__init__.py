@@ -1,0 +1,1 @@
+"""The HTTP API: dependencies, error shape and one router per resource."""

@@ -1,0 +1,14 @@
+"""One router per resource, collected into the v1 API router."""
+
+from fastapi import APIRouter
+
+from app.api.routes import analyses, club, health, keys, performers, references, session
+
+api_router = APIRouter()
+api_router.include_router(health.router)
+api_router.include_router(club.router)
+api_router.include_router(keys.router)
+api_router.include_router(performers.router)
+api_router.include_router(references.router)
+api_router.include_router(analyses.router)
+api_router.include_router(session.router)

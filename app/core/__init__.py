@@ -1,0 +1,1 @@
+"""Service infrastructure: settings, database, storage, queue seam, security, validation."""

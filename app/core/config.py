@@ -1,0 +1,79 @@
+"""Service settings: environment variables prefixed ``COACH_`` (``COACH_DATA_DIR``, ...)."""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+from typing import Literal
+
+from pydantic import Field, model_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+#: The placeholder secret; refused outside development.
+DEFAULT_SECRET = "changethis"
+
+
+class Settings(BaseSettings):
+    model_config = SettingsConfigDict(env_prefix="COACH_", env_file=".env", extra="ignore")
+
+    environment: Literal["development", "staging", "production"] = "development"
+    data_dir: Path = Path("./data")
+    #: Any SQLAlchemy URL; empty means a SQLite file ``coach.db`` in the data dir.
+    database_url: str = ""
+    #: Signs browser session cookies.
+    secret_key: str = DEFAULT_SECRET
+    #: "embedded" runs a local worker without Redis (``coach serve``); else a Celery broker URL.
+    broker_url: str = "embedded"
+    worker_concurrency: int = Field(default=1, ge=1, le=64)
+    #: Browser origins allowed by CORS; empty (the default) allows none.
+    cors_origins: list[str] = []
+
+    # Input limits.
+    max_video_bytes: int = Field(default=200 * 1024 * 1024, gt=0)
+    max_video_duration_s: float = Field(default=60.0, gt=0)
+    max_bvh_bytes: int = Field(default=20 * 1024 * 1024, gt=0)
+    max_domain_bytes: int = Field(default=64 * 1024, gt=0)
+    max_page_size: int = Field(default=100, ge=1, le=1000)
+    #: Extra bytes a multipart body may carry beyond the file (boundaries, other fields).
+    multipart_overhead_bytes: int = 64 * 1024
+
+    # Per-key rate limit (token bucket): sustained requests per second and burst size.
+    rate_limit_per_s: float = Field(default=5.0, gt=0)
+    rate_limit_burst: int = Field(default=60, ge=1)
+
+    # Progress reflection and server-sent events.
+    sse_poll_s: float = Field(default=0.5, gt=0)
+    sse_max_s: float = Field(default=3600.0, gt=0)
+    #: Seconds between background syncs of running analyses (fires webhooks); 0 disables.
+    reflect_interval_s: float = Field(default=2.0, ge=0)
+
+    # Webhooks: bounded retries with exponential backoff.
+    webhook_attempts: int = Field(default=5, ge=1, le=20)
+    webhook_backoff_s: float = Field(default=2.0, ge=0)
+    webhook_timeout_s: float = Field(default=10.0, gt=0)
+
+    session_max_age_s: int = 14 * 24 * 3600
+
+    @property
+    def sqlalchemy_url(self) -> str:
+        if self.database_url:
+            return self.database_url
+        return f"sqlite:///{(self.data_dir / 'coach.db').resolve()}"
+
+    @property
+    def is_development(self) -> bool:
+        return self.environment == "development"
+
+    @model_validator(mode="after")
+    def _refuse_default_secrets(self) -> Settings:
+        if self.secret_key == DEFAULT_SECRET and not self.is_development:
+            raise ValueError(
+                f"COACH_SECRET_KEY is the default {DEFAULT_SECRET!r}; set a real secret "
+                f"outside development (environment={self.environment})"
+            )
+        return self
+
+
+@lru_cache
+def get_settings() -> Settings:
+    return Settings()

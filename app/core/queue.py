@@ -1,0 +1,53 @@
+"""The seam between the API and the workers: enqueue and revoke, nothing else.
+
+Routes get a :class:`JobQueue` through ``QueueDep``; tests override :func:`get_queue` with a
+recorder. The Celery client is imported lazily so the API starts (and answers reads) while
+the worker package is being installed or its broker is down.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+from worker.contract import AnalysisJob
+
+
+class QueueUnavailable(Exception):
+    """The job could not be handed to the workers (no worker package, broker down)."""
+
+
+class JobQueue(Protocol):
+    def enqueue(self, job: AnalysisJob) -> str: ...
+
+    def revoke(self, task_id: str) -> None: ...
+
+
+class CeleryQueue:
+    """Hands jobs to ``worker.celery_app`` (Celery over Redis or the embedded transport)."""
+
+    def enqueue(self, job: AnalysisJob) -> str:
+        try:
+            from worker.celery_app import enqueue
+        except ImportError as exc:
+            raise QueueUnavailable(f"the worker package is not available: {exc}") from exc
+        try:
+            return str(enqueue(job))
+        except Exception as exc:  # kombu/redis raise many types; all mean "not queued"
+            raise QueueUnavailable(f"could not queue the analysis: {exc}") from exc
+
+    def revoke(self, task_id: str) -> None:
+        try:
+            from worker.celery_app import revoke
+        except ImportError as exc:
+            raise QueueUnavailable(f"the worker package is not available: {exc}") from exc
+        try:
+            revoke(task_id)
+        except Exception as exc:
+            raise QueueUnavailable(f"could not revoke task {task_id}: {exc}") from exc
+
+
+_queue = CeleryQueue()
+
+
+def get_queue() -> JobQueue:
+    return _queue

@@ -1,0 +1,176 @@
+"""Worker progress reflected into the database, and completion webhooks.
+
+Workers report only through files in the analysis folder (``worker.contract``): status.json
+(replaced atomically) and result.json. The API reads them on every read of an analysis, in
+the server-sent-events loop and, so that webhooks fire even when nobody is watching, from a
+background :class:`Reflector` thread. A database state that is final (done, failed,
+cancelled) is never changed again by what the folder says.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import httpx
+from sqlalchemy import update
+from sqlalchemy.orm import Session, sessionmaker
+
+from app import crud
+from app.core.config import Settings
+from app.core.security import sign_webhook
+from app.core.storage import Storage
+from app.models import ANALYSIS_STATES, TERMINAL_STATES, Analysis, utcnow
+from app.schemas import AnalysisPublic
+
+log = logging.getLogger("app.reflect")
+
+STATUS_FILE = "status.json"
+RESULT_FILE = "result.json"
+
+#: Called with the analysis after this process moved it into a final state.
+OnFinal = Callable[[Analysis], None]
+
+
+def _text(value: Any, limit: int) -> str:
+    return str(value)[:limit] if value is not None else ""
+
+
+def reflect(session: Session, analysis: Analysis, *, on_final: OnFinal | None = None) -> bool:
+    """Update ``analysis`` from its folder; returns True when the row changed."""
+    if analysis.status in TERMINAL_STATES:
+        return False
+    work = Path(analysis.work_dir)
+    status = Storage.read_json(work / STATUS_FILE) or {}
+    result_file = work / RESULT_FILE
+    state = status.get("state") if status.get("state") in ANALYSIS_STATES else analysis.status
+    values: dict[str, Any] = {
+        "status": state,
+        "stage": _text(status.get("stage", analysis.stage), 64),
+        "message": _text(status.get("message", analysis.message), 1000),
+        "error": _text(status["error"], 10000) if status.get("error") else analysis.error,
+    }
+    try:
+        values["progress"] = min(max(float(status.get("progress", analysis.progress)), 0.0), 1.0)
+    except (TypeError, ValueError):
+        values["progress"] = analysis.progress
+    # result.json is written (atomically) only when the analysis succeeded.
+    if state not in ("failed", "cancelled") and result_file.is_file():
+        result = Storage.read_json(result_file)
+        if result is not None:
+            values.update(status="done", progress=1.0, result_path=str(result_file))
+            timing = result.get("timing_s")
+            values["timings"] = timing if isinstance(timing, dict) else None
+    if state == "done" and "result_path" not in values:
+        values["status"] = analysis.status  # done without a readable result: wait for it
+    if all(getattr(analysis, k) == v for k, v in values.items()):
+        return False
+    final = values["status"] in TERMINAL_STATES
+    now = utcnow()
+    stmt = (
+        update(Analysis)
+        .where(Analysis.id == analysis.id, Analysis.status.not_in(TERMINAL_STATES))
+        .values(**values, updated_at=now, **({"notified_at": now} if final else {}))
+    )
+    # The conditional update makes exactly one reader the owner of the final transition.
+    owned = session.execute(stmt).rowcount == 1
+    session.commit()
+    session.refresh(analysis)
+    if owned and final and on_final is not None:
+        on_final(analysis)
+    return owned
+
+
+class Notifier:
+    """Sends completion webhooks from background threads, retrying with backoff (bounded)."""
+
+    def __init__(self, settings: Settings, session_factory: sessionmaker) -> None:
+        self.settings = settings
+        self.session_factory = session_factory
+        self._threads: list[threading.Thread] = []
+        self._lock = threading.Lock()
+
+    def __call__(self, analysis: Analysis) -> None:
+        if analysis.status not in ("done", "failed"):
+            return
+        with self.session_factory() as session:
+            club = crud.get_club(session, analysis.club_id)
+            if club is None or not club.webhook_url or not club.webhook_secret:
+                return
+            url, secret = club.webhook_url, club.webhook_secret
+        body = json.dumps(
+            {
+                "event": f"analysis.{analysis.status}",
+                "analysis": AnalysisPublic.model_validate(analysis).model_dump(mode="json"),
+            },
+            separators=(",", ":"),
+        ).encode()
+        thread = threading.Thread(
+            target=self._deliver, args=(url, secret, body, analysis.id), daemon=True
+        )
+        with self._lock:
+            self._threads = [t for t in self._threads if t.is_alive()] + [thread]
+        thread.start()
+
+    def _deliver(self, url: str, secret: str, body: bytes, analysis_id: str) -> None:
+        headers = {
+            "Content-Type": "application/json",
+            "User-Agent": "motion-coach-webhook/1",
+            "X-Coach-Signature": sign_webhook(body, secret),
+        }
+        s = self.settings
+        for attempt in range(s.webhook_attempts):
+            try:
+                r = httpx.post(url, content=body, headers=headers, timeout=s.webhook_timeout_s)
+                if r.status_code < 300:
+                    log.info("webhook.delivered analysis=%s attempt=%d", analysis_id, attempt + 1)
+                    return
+                if 400 <= r.status_code < 500 and r.status_code not in (408, 429):
+                    log.warning("webhook.refused analysis=%s status=%d", analysis_id, r.status_code)
+                    return
+                log.warning("webhook.retry analysis=%s status=%d", analysis_id, r.status_code)
+            except httpx.HTTPError as exc:
+                log.warning("webhook.retry analysis=%s error=%s", analysis_id, exc)
+            if attempt + 1 < s.webhook_attempts:
+                time.sleep(s.webhook_backoff_s * 2**attempt)
+        log.error("webhook.gave_up analysis=%s attempts=%d", analysis_id, s.webhook_attempts)
+
+    def wait(self, timeout: float = 10.0) -> None:
+        """Join the delivery threads (tests, shutdown)."""
+        deadline = time.monotonic() + timeout
+        with self._lock:
+            threads = list(self._threads)
+        for t in threads:
+            t.join(max(0.0, deadline - time.monotonic()))
+
+
+class Reflector:
+    """Background thread: reflects every active analysis every ``interval`` seconds."""
+
+    def __init__(self, session_factory: sessionmaker, on_final: OnFinal, interval: float) -> None:
+        self.session_factory = session_factory
+        self.on_final = on_final
+        self.interval = interval
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="coach-reflector", daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5)
+
+    def _run(self) -> None:
+        while not self._stop.wait(self.interval):
+            try:
+                with self.session_factory() as session:
+                    for analysis in crud.list_active_analyses(session):
+                        reflect(session, analysis, on_final=self.on_final)
+            except Exception:  # keep reflecting: one bad row or a locked db is not fatal
+                log.exception("reflector.error")

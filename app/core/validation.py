@@ -1,0 +1,108 @@
+"""Input checks before anything is accepted: videos are probed, BVH files imported.
+
+The engine is imported only here and only for validation. Every refusal is an
+:class:`engine.errors.InvalidInput` whose message a person can read.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+from app.core.config import Settings
+from engine.errors import InvalidInput
+
+
+def probe_video(path: Path, settings: Settings) -> dict[str, Any]:
+    """Open the video and decode its first frames; returns what the probe learned."""
+    from engine.io.video import VideoLimits
+    from engine.io.video import probe_video as engine_probe
+
+    limits = VideoLimits(
+        max_duration_s=settings.max_video_duration_s, max_bytes=settings.max_video_bytes
+    )
+    try:
+        info = engine_probe(path, limits)
+    except InvalidInput as exc:
+        raise InvalidInput(_hide_paths(str(exc), path)) from None
+    return {
+        "frames": int(info.frames),
+        "fps": float(info.fps),
+        "width": int(info.width),
+        "height": int(info.height),
+        "duration_s": float(info.duration_s),
+        "codec": str(info.codec),
+    }
+
+
+def _hide_paths(message: str, path: Path) -> str:
+    """Server paths stay on the server: FFmpeg quotes the full path in its errors."""
+    for p in (str(path.resolve()), str(path)):
+        message = message.replace(p, path.name)
+    return message
+
+
+#: Keys of the domain JSON used at import (the rest is engine.reference.domain's format).
+IMPORT_KEYS = ("mapping", "units_to_m", "segments")
+
+
+def engine_domain(domain: dict[str, Any]) -> dict[str, Any]:
+    """The part of the domain JSON the engine reads from ``<ref>.domain.json``."""
+    return {k: v for k, v in domain.items() if k not in IMPORT_KEYS}
+
+
+def parse_domain(raw: bytes) -> dict[str, Any]:
+    """A domain configuration: one JSON object. Import keys ``mapping`` (our joint -> BVH
+    joint), ``units_to_m`` and ``segments`` (reference frame boundaries), plus the engine's
+    domain format (segment names, bone weights, tolerances: engine.reference.domain)."""
+    try:
+        data = json.loads(raw.decode("utf-8"))
+    except (UnicodeDecodeError, ValueError) as exc:
+        raise InvalidInput(f"the domain configuration is not valid JSON ({exc})") from exc
+    if not isinstance(data, dict):
+        raise InvalidInput("the domain configuration must be a JSON object")
+    mapping = data.get("mapping")
+    if mapping is not None and not (
+        isinstance(mapping, dict)
+        and all(isinstance(k, str) and isinstance(v, str) for k, v in mapping.items())
+    ):
+        raise InvalidInput("domain 'mapping' must be an object of joint name -> BVH joint name")
+    units = data.get("units_to_m")
+    if units is not None and not (
+        isinstance(units, int | float) and math.isfinite(units) and units > 0
+    ):
+        raise InvalidInput("domain 'units_to_m' must be a positive number")
+    segments = data.get("segments")
+    if segments is not None and not (
+        isinstance(segments, list) and all(isinstance(s, int) and s >= 0 for s in segments)
+    ):
+        raise InvalidInput("domain 'segments' must be a list of reference frame numbers")
+    try:
+        from engine.reference.domain import parse_domain as engine_parse
+    except ImportError:  # older engine without domain knowledge
+        return data
+    engine_parse(engine_domain(data), source="domain configuration")
+    return data
+
+
+def inspect_reference(path: Path, domain: dict[str, Any] | None) -> dict[str, Any]:
+    """Import the BVH onto the 17-joint body (refusing unmappable files, naming the missing
+    joints) and return the derived description stored with the reference."""
+    from engine.io.bvh import load_reference
+
+    domain = domain or {}
+    ref = load_reference(path, mapping=domain.get("mapping"), units_to_m=domain.get("units_to_m"))
+    motion = ref.motion
+    frames = int(motion.frames)
+    segments = sorted({int(s) for s in domain.get("segments", []) if int(s) < frames})
+    return {
+        "frames": frames,
+        "fps": float(motion.fps),
+        "duration_s": float(motion.duration_s),
+        "first_motion_frame": int(motion.first_motion_frame),
+        "profile": str(ref.profile),
+        "source_joints": list(ref.source_joint_names),
+        "segments": segments,
+    }

@@ -1,0 +1,240 @@
+"""Database reads and writes. Every query of club data filters by ``club_id``.
+
+Functions return the row or None and never raise HTTP errors: the route decides.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime, timedelta
+from typing import Any
+
+from sqlalchemy import func, select
+from sqlalchemy.orm import Session
+
+from app.core import security
+from app.models import Analysis, ApiKey, Club, Reference, User, utcnow
+
+#: last_used_at is written at most this often per key (one write per request is wasteful).
+LAST_USED_RESOLUTION = timedelta(seconds=60)
+
+
+# ---- clubs
+def create_club(session: Session, *, name: str) -> Club:
+    club = Club(name=name)
+    session.add(club)
+    session.flush()
+    return club
+
+
+def get_club(session: Session, club_id: int) -> Club | None:
+    return session.get(Club, club_id)
+
+
+def get_club_by_name(session: Session, name: str) -> Club | None:
+    return session.scalars(select(Club).where(Club.name == name).limit(1)).first()
+
+
+def update_club(
+    session: Session, club: Club, *, name: str | None, webhook_url: str | None, rotate: bool
+) -> str | None:
+    """Apply an update; returns a newly generated webhook secret, if one was made."""
+    new_secret = None
+    if name is not None:
+        club.name = name
+    if webhook_url is not None:
+        club.webhook_url = webhook_url or None
+    if club.webhook_url and (rotate or not club.webhook_secret):
+        club.webhook_secret = new_secret = security.new_webhook_secret()
+    session.commit()
+    return new_secret
+
+
+# ---- API keys
+def create_api_key(session: Session, *, club_id: int, name: str = "") -> tuple[ApiKey, str]:
+    key, prefix, key_hash = security.new_api_key()
+    row = ApiKey(club_id=club_id, name=name, prefix=prefix, key_hash=key_hash)
+    session.add(row)
+    session.commit()
+    return row, key
+
+
+def get_active_api_key(session: Session, key: str) -> ApiKey | None:
+    row = session.scalars(
+        select(ApiKey).where(ApiKey.key_hash == security.hash_api_key(key))
+    ).first()
+    if row is None or row.revoked_at is not None:
+        return None
+    return row
+
+
+def touch_api_key(session: Session, row: ApiKey) -> None:
+    now = utcnow()
+    if row.last_used_at is None or now - row.last_used_at > LAST_USED_RESOLUTION:
+        row.last_used_at = now
+        session.commit()
+
+
+def list_api_keys(session: Session, *, club_id: int) -> list[ApiKey]:
+    return list(
+        session.scalars(select(ApiKey).where(ApiKey.club_id == club_id).order_by(ApiKey.id))
+    )
+
+
+def get_api_key(session: Session, *, club_id: int, key_id: int) -> ApiKey | None:
+    return session.scalars(
+        select(ApiKey).where(ApiKey.club_id == club_id, ApiKey.id == key_id)
+    ).first()
+
+
+def revoke_api_key(session: Session, row: ApiKey) -> None:
+    if row.revoked_at is None:
+        row.revoked_at = utcnow()
+        session.commit()
+
+
+# ---- users
+def create_user(
+    session: Session,
+    *,
+    club_id: int,
+    role: str,
+    email: str,
+    display_name: str,
+    password: str | None = None,
+) -> User:
+    user = User(
+        club_id=club_id,
+        role=role,
+        email=email.lower(),
+        display_name=display_name,
+        password_hash=security.hash_password(password) if password else None,
+    )
+    session.add(user)
+    session.commit()
+    return user
+
+
+def get_user_by_email(session: Session, *, club_id: int, email: str) -> User | None:
+    return session.scalars(
+        select(User).where(User.club_id == club_id, User.email == email.lower())
+    ).first()
+
+
+def get_user(session: Session, user_id: int) -> User | None:
+    return session.get(User, user_id)
+
+
+def get_performer(session: Session, *, club_id: int, user_id: int) -> User | None:
+    return session.scalars(
+        select(User).where(User.club_id == club_id, User.id == user_id, User.role == "performer")
+    ).first()
+
+
+def list_performers(session: Session, *, club_id: int, limit: int, offset: int) -> list[User]:
+    stmt = (
+        select(User)
+        .where(User.club_id == club_id, User.role == "performer")
+        .order_by(User.id)
+        .limit(limit)
+        .offset(offset)
+    )
+    return list(session.scalars(stmt))
+
+
+def authenticate(session: Session, *, email: str, password: str) -> User | None:
+    """The user with this email whose password matches (emails are unique per club)."""
+    users = session.scalars(select(User).where(User.email == email.lower()))
+    for user in users:
+        if security.verify_password(password, user.password_hash):
+            return user
+    return None
+
+
+# ---- references
+def create_reference(session: Session, *, club_id: int, name: str) -> Reference:
+    """A row with an id (flushed, not committed) so files can be placed under it."""
+    ref = Reference(club_id=club_id, name=name, bvh_path="", derived={})
+    session.add(ref)
+    session.flush()
+    return ref
+
+
+def get_reference(session: Session, *, club_id: int, reference_id: int) -> Reference | None:
+    return session.scalars(
+        select(Reference).where(Reference.club_id == club_id, Reference.id == reference_id)
+    ).first()
+
+
+def get_reference_by_name(session: Session, *, club_id: int, name: str) -> Reference | None:
+    return session.scalars(
+        select(Reference).where(Reference.club_id == club_id, Reference.name == name)
+    ).first()
+
+
+def list_references(session: Session, *, club_id: int, limit: int, offset: int) -> list[Reference]:
+    stmt = (
+        select(Reference)
+        .where(Reference.club_id == club_id)
+        .order_by(Reference.id)
+        .limit(limit)
+        .offset(offset)
+    )
+    return list(session.scalars(stmt))
+
+
+def reference_in_use(session: Session, reference: Reference) -> bool:
+    stmt = select(func.count()).where(Analysis.reference_id == reference.id)
+    return bool(session.scalar(stmt))
+
+
+# ---- analyses
+def get_analysis(session: Session, *, club_id: int, analysis_id: str) -> Analysis | None:
+    return session.scalars(
+        select(Analysis).where(Analysis.club_id == club_id, Analysis.id == analysis_id)
+    ).first()
+
+
+def get_analysis_by_idempotency_key(session: Session, *, club_id: int, key: str) -> Analysis | None:
+    return session.scalars(
+        select(Analysis).where(Analysis.club_id == club_id, Analysis.idempotency_key == key)
+    ).first()
+
+
+def list_analyses(
+    session: Session,
+    *,
+    club_id: int,
+    limit: int,
+    offset: int,
+    performer_id: int | None = None,
+    reference_id: int | None = None,
+    status: str | None = None,
+    created_after: datetime | None = None,
+    created_before: datetime | None = None,
+) -> tuple[list[Analysis], int]:
+    conditions: list[Any] = [Analysis.club_id == club_id]
+    if performer_id is not None:
+        conditions.append(Analysis.performer_id == performer_id)
+    if reference_id is not None:
+        conditions.append(Analysis.reference_id == reference_id)
+    if status is not None:
+        conditions.append(Analysis.status == status)
+    if created_after is not None:
+        conditions.append(Analysis.created_at >= created_after)
+    if created_before is not None:
+        conditions.append(Analysis.created_at < created_before)
+    total = session.scalar(select(func.count()).select_from(Analysis).where(*conditions)) or 0
+    stmt = (
+        select(Analysis)
+        .where(*conditions)
+        .order_by(Analysis.created_at.desc(), Analysis.id)
+        .limit(limit)
+        .offset(offset)
+    )
+    return list(session.scalars(stmt)), int(total)
+
+
+def list_active_analyses(session: Session, *, limit: int = 500) -> list[Analysis]:
+    """Analyses a worker may still be working on (every club: used by the reflector)."""
+    stmt = select(Analysis).where(Analysis.status.in_(("queued", "running"))).limit(limit)
+    return list(session.scalars(stmt))

@@ -1,0 +1,160 @@
+"""Request and response bodies, one schema per role (``XCreate``, ``XUpdate``, ``XPublic``).
+
+Every string has a length limit and every list a size limit: nothing unbounded comes in.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Any, Literal
+
+from pydantic import AnyHttpUrl, BaseModel, ConfigDict, Field, field_validator
+
+# A plausibility check only (no DNS, no email-validator dependency).
+EMAIL_PATTERN = r"^[^@\s]+@[^@\s]+\.[^@\s]+$"
+
+AnalysisState = Literal["queued", "running", "done", "failed", "cancelled"]
+
+
+class _Orm(BaseModel):
+    model_config = ConfigDict(from_attributes=True)
+
+
+# ---- errors (the one error shape of the API)
+class ErrorBody(BaseModel):
+    code: str
+    message: str
+    details: dict[str, Any] = {}
+
+
+class ErrorResponse(BaseModel):
+    error: ErrorBody
+
+
+# ---- health
+class HealthPublic(BaseModel):
+    status: Literal["ok"] = "ok"
+    version: str
+    database: Literal["ok", "error"]
+
+
+# ---- club
+class ClubPublic(_Orm):
+    id: int
+    name: str
+    webhook_url: str | None
+    created_at: datetime
+
+
+class ClubUpdate(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    name: str | None = Field(default=None, min_length=1, max_length=200)
+    #: An http(s) URL, or "" to remove the webhook.
+    webhook_url: AnyHttpUrl | Literal[""] | None = Field(default=None)
+    rotate_webhook_secret: bool = False
+
+    @field_validator("webhook_url", mode="before")
+    @classmethod
+    def _url_length(cls, v: Any) -> Any:
+        if isinstance(v, str) and len(v) > 2000:
+            raise ValueError("webhook_url is longer than 2000 characters")
+        return v
+
+
+class ClubUpdated(ClubPublic):
+    #: Shown only when a new secret was generated (first webhook URL or rotation).
+    webhook_secret: str | None = None
+
+
+# ---- API keys
+class ApiKeyCreate(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    name: str = Field(default="", max_length=100)
+
+
+class ApiKeyPublic(_Orm):
+    id: int
+    name: str
+    prefix: str
+    created_at: datetime
+    last_used_at: datetime | None
+    revoked_at: datetime | None
+
+
+class ApiKeyCreated(ApiKeyPublic):
+    #: The whole key; shown once, never again.
+    key: str
+
+
+# ---- users
+class PerformerCreate(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    email: str = Field(max_length=320, pattern=EMAIL_PATTERN)
+    display_name: str = Field(min_length=1, max_length=200)
+    password: str | None = Field(default=None, min_length=8, max_length=256)
+
+
+class UserPublic(_Orm):
+    id: int
+    role: Literal["coach", "performer"]
+    email: str
+    display_name: str
+    created_at: datetime
+
+
+class LoginRequest(BaseModel):
+    email: str = Field(max_length=320, pattern=EMAIL_PATTERN)
+    password: str = Field(min_length=1, max_length=256)
+
+
+# ---- references
+class ReferencePublic(_Orm):
+    id: int
+    name: str
+    domain_config: dict[str, Any] | None
+    derived: dict[str, Any]
+    created_at: datetime
+
+
+# ---- analyses
+class AnalysisPublic(_Orm):
+    id: str
+    performer_id: int
+    reference_id: int
+    status: AnalysisState
+    stage: str
+    progress: float
+    message: str
+    error: str | None
+    timings: dict[str, Any] | None
+    created_at: datetime
+    updated_at: datetime
+
+
+class AnalysesPublic(BaseModel):
+    items: list[AnalysisPublic]
+    total: int
+    limit: int
+    offset: int
+
+
+class SegmentPublic(BaseModel):
+    index: int
+    reference_start: int
+    reference_end: int
+    performer_start: int
+    performer_end: int
+    #: Performer duration / reference duration (> 1: slower than the expert).
+    tempo_ratio: float | None
+    mean_error_deg: float
+    worst_bone: str | None
+    worst_bone_error_deg: float | None
+    bone_mean_errors_deg: dict[str, float]
+
+
+class SegmentsPublic(BaseModel):
+    analysis_id: str
+    segments: list[SegmentPublic]

@@ -1,0 +1,97 @@
+from tests.app.conftest import make_club
+
+
+def test_health_needs_no_key(client):
+    r = client.get("/api/v1/health")
+    assert r.status_code == 200
+    assert r.json()["database"] == "ok"
+
+
+def test_missing_key_is_401_with_the_error_shape(client, club):
+    r = client.get("/api/v1/references")
+    assert r.status_code == 401
+    assert r.json()["error"]["code"] == "unauthorized"
+    assert set(r.json()["error"]) == {"code", "message", "details"}
+
+
+def test_wrong_key_is_401(client, club):
+    assert client.get("/api/v1/references", headers={"X-API-Key": "mc_nope"}).status_code == 401
+
+
+def test_keys_are_shown_once_listed_by_prefix_and_revocable(client, club):
+    r = client.post("/api/v1/keys", headers=club.headers, json={"name": "ci"})
+    assert r.status_code == 201
+    new = r.json()
+    assert new["key"].startswith(new["prefix"])
+    listed = client.get("/api/v1/keys", headers=club.headers).json()
+    assert [k["prefix"] for k in listed if k["id"] == new["id"]] == [new["prefix"]]
+    assert all("key" not in k for k in listed)
+    new_headers = {"X-API-Key": new["key"]}
+    assert client.get("/api/v1/references", headers=new_headers).status_code == 200
+    assert client.delete(f"/api/v1/keys/{new['id']}", headers=club.headers).status_code == 204
+    r = client.get("/api/v1/references", headers=new_headers)
+    assert r.status_code == 401
+    assert "revoked" in r.json()["error"]["message"]
+
+
+def test_other_clubs_keys_are_404(client, app, club):
+    other = make_club(app, "beta")
+    keys = client.get("/api/v1/keys", headers=other.headers).json()
+    r = client.delete(f"/api/v1/keys/{keys[0]['id']}", headers=club.headers)
+    assert r.status_code == 404
+
+
+def test_rate_limit_gives_429_with_retry_after(client, app, club):
+    from app.core.ratelimit import RateLimiter
+
+    app.state.rate_limiter = RateLimiter(rate_per_s=0.01, burst=3)
+    codes = [client.get("/api/v1/keys", headers=club.headers).status_code for _ in range(4)]
+    assert codes == [200, 200, 200, 429]
+    r = client.get("/api/v1/keys", headers=club.headers)
+    assert r.json()["error"]["code"] == "rate_limited"
+    assert int(r.headers["Retry-After"]) >= 1
+
+
+def test_unknown_path_and_bad_input_use_the_error_shape(client, club):
+    r = client.get("/api/v1/nothing-here")
+    assert r.status_code == 404 and r.json()["error"]["code"] == "not_found"
+    r = client.get("/api/v1/analyses?limit=5000", headers=club.headers)
+    assert r.status_code == 422 and r.json()["error"]["code"] == "invalid_request"
+    r = client.post("/api/v1/performers", headers=club.headers, json={"email": "x"})
+    assert r.status_code == 422 and r.json()["error"]["details"]["errors"]
+
+
+def test_browser_session_sign_in(client, app, club):
+    from app import crud
+
+    with app.state.sessionmaker() as s:
+        crud.create_user(
+            s, club_id=club.id, role="coach", email="c@alpha.org", display_name="C",
+            password="a long password",
+        )  # fmt: skip
+    assert client.get("/api/v1/session").status_code == 401
+    bad = {"email": "c@alpha.org", "password": "wrong password"}
+    assert client.post("/api/v1/session", json=bad).status_code == 401
+    good = {"email": "c@alpha.org", "password": "a long password"}
+    assert client.post("/api/v1/session", json=good).status_code == 200
+    assert client.get("/api/v1/session").json()["role"] == "coach"
+    assert client.delete("/api/v1/session").status_code == 204
+    assert client.get("/api/v1/session").status_code == 401
+
+
+def test_cors_is_closed_by_default(client):
+    r = client.options(
+        "/api/v1/health",
+        headers={"Origin": "https://evil.example", "Access-Control-Request-Method": "GET"},
+    )
+    assert "access-control-allow-origin" not in r.headers
+
+
+def test_default_secret_refused_outside_development():
+    import pytest
+
+    from app.core.config import Settings
+
+    with pytest.raises(ValueError, match="COACH_SECRET_KEY"):
+        Settings(environment="production")
+    Settings(environment="production", secret_key="s3cret-from-the-vault")

@@ -1,0 +1,80 @@
+from tests.app.conftest import data_files, make_club, stored_files
+
+
+def test_reference_upload_list_get_delete(client, club_ref, settings):
+    h = club_ref.headers
+    listed = client.get("/api/v1/references", headers=h).json()
+    assert [r["name"] for r in listed] == ["swing"]
+    ref = client.get(f"/api/v1/references/{club_ref.reference_id}", headers=h).json()
+    assert ref["derived"]["frames"] == 580 and ref["derived"]["fps"] > 100
+    assert "bvh_path" not in ref
+    stored = data_files(settings, "references")
+    assert any(p.name == "reference.bvh" for p in stored)
+    assert (
+        client.delete(f"/api/v1/references/{club_ref.reference_id}", headers=h).status_code == 204
+    )
+    assert client.get(f"/api/v1/references/{club_ref.reference_id}", headers=h).status_code == 404
+    assert not any(p.is_file() for p in data_files(settings, "references"))
+
+
+def test_unmappable_bvh_is_422_naming_missing_joints(client, club, bvh_file, tmp_path, settings):
+    bad = tmp_path / "bad.bvh"
+    bad.write_text(bvh_file.read_text().replace("LeftForeArm", "Tentacle"))
+    with open(bad, "rb") as f:
+        r = client.post("/api/v1/references", headers=club.headers, files={"file": ("b.bvh", f)})
+    assert r.status_code == 422
+    assert r.json()["error"]["code"] == "invalid_reference"
+    assert "l_elbow" in r.json()["error"]["message"]
+    assert client.get("/api/v1/references", headers=club.headers).json() == []
+    assert stored_files(settings) == []
+
+
+def test_domain_json_is_checked_and_kept(client, club, bvh_file):
+    with open(bvh_file, "rb") as f:
+        r = client.post(
+            "/api/v1/references", headers=club.headers,
+            files={"file": ("a.bvh", f), "domain": ("d.json", b'{"segments": [1, 200, 400]}')},
+        )  # fmt: skip
+    assert r.status_code == 201, r.text
+    assert r.json()["derived"]["segments"] == [1, 200, 400]
+    with open(bvh_file, "rb") as f:
+        r = client.post(
+            "/api/v1/references", headers=club.headers,
+            files={"file": ("a.bvh", f), "domain": ("d.json", b"[1, 2")},
+        )  # fmt: skip
+    assert r.status_code == 422 and r.json()["error"]["code"] == "invalid_domain"
+
+
+def test_other_clubs_reference_is_404(client, app, club_ref):
+    other = make_club(app, "beta")
+    url = f"/api/v1/references/{club_ref.reference_id}"
+    assert client.get(url, headers=other.headers).status_code == 404
+    assert client.delete(url, headers=other.headers).status_code == 404
+    assert client.get("/api/v1/references", headers=other.headers).json() == []
+
+
+def test_performers(client, club):
+    body = {"email": "Ann@Example.org", "display_name": "Ann"}
+    r = client.post("/api/v1/performers", headers=club.headers, json=body)
+    assert r.status_code == 201 and r.json()["role"] == "performer"
+    assert client.post("/api/v1/performers", headers=club.headers, json=body).status_code == 409
+    names = [
+        p["display_name"] for p in client.get("/api/v1/performers", headers=club.headers).json()
+    ]
+    assert names == ["Performer", "Ann"]
+
+
+def test_domain_in_the_engine_format_is_validated(client, club, bvh_file):
+    doc = b'{"sport": "golf", "tolerances_deg": {"l_knee": 15}, "segments": [1, 300]}'
+    with open(bvh_file, "rb") as f:
+        r = client.post(
+            "/api/v1/references", headers=club.headers,
+            files={"file": ("a.bvh", f), "domain": ("d.json", doc)},
+        )  # fmt: skip
+    assert r.status_code == 201, r.text
+    with open(bvh_file, "rb") as f:
+        r = client.post(
+            "/api/v1/references", headers=club.headers,
+            files={"file": ("a.bvh", f), "domain": ("d.json", b'{"tolerances_deg": {"toe": 3}}')},
+        )  # fmt: skip
+    assert r.status_code == 422 and r.json()["error"]["code"] == "invalid_domain"
