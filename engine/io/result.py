@@ -1,0 +1,247 @@
+"""The result JSON of an analysis (DESIGN.md "Result of an analysis"): build, validate, write.
+
+Degrees and pixels appear here, at the edge; the engine computes in radians and metres.
+The schema lives beside this module in ``result_schema.json``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from collections.abc import Mapping, Sequence
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from engine.body.skeleton import BONE_NAMES, JOINTS
+from engine.errors import InvalidInput
+from engine.render.camera import Camera
+from engine.stages.selection import Selection
+
+SCHEMA_PATH = Path(__file__).with_name("result_schema.json")
+
+
+def _r(a: np.ndarray | float, digits: int) -> Any:
+    """Rounded nested lists (JSON size: mm and 1/1000 deg are plenty)."""
+    return np.round(np.asarray(a, dtype=float), digits).tolist()
+
+
+def build_result(
+    *,
+    reference_name: str,
+    reference_frames: int,
+    reference_fps: float,
+    video: Mapping[str, float | int],
+    camera: Camera,
+    selection: Selection,
+    candidates: Sequence[np.ndarray],
+    timing_s: Mapping[str, float],
+    domain: Any | None = None,
+    reference_frame_offset: int = 0,
+    video_frame_offset: int = 0,
+) -> dict[str, Any]:
+    """The result document of DESIGN.md from stage 4's output.
+
+    Parameters
+    ----------
+    reference_name, reference_frames, reference_fps
+        Of the BVH file as given (frame count includes a conversion T-pose).
+    video : mapping
+        ``frames``, ``fps``, ``width``, ``height`` of the whole video.
+    camera : Camera
+        Stage 1's camera, for ``joints_2d`` (thesis 4.2).
+    selection : Selection
+        Stage 4 (thesis 4.7).
+    candidates : list of ndarray, shape (K_t', 17, 3)
+        Stage 3's candidate sets, indices matching ``selection.selected``.
+    timing_s : mapping
+        Seconds per stage; ``total`` is added when absent.
+    domain : engine.reference.domain.Domain, optional
+        Adds ``score_deg`` (thesis 6.8) and segment names; raw errors are unchanged.
+    reference_frame_offset : int
+        Added to every reference frame (C was computed on a trimmed reference, e.g. without
+        the conversion T-pose).
+    video_frame_offset : int
+        Added to every video frame (analysis of a frame range ``A:B``).
+
+    Returns
+    -------
+    dict
+        JSON-ready, valid against ``result_schema.json``.
+    """
+    n = selection.C.shape[0]
+    if len(candidates) != n:
+        raise InvalidInput(
+            f"candidates: expected {n} frames like the selection, got {len(candidates)}"
+        )
+    deg_bones = np.degrees(selection.bone_errors)
+    deg_eps = np.degrees(selection.posture_error)
+    score = np.degrees(domain.score(selection.bone_errors)) if domain is not None else None
+    joints_2d = camera.project(selection.joints)
+    frames = []
+    for i in range(n):
+        f: dict[str, Any] = {
+            "t": int(i + video_frame_offset),
+            "reference_frame": int(selection.C[i] + reference_frame_offset),
+            "joints_3d": _r(selection.joints[i], 4),
+            "joints_2d": _r(joints_2d[i], 2),
+            "candidates": _r(candidates[i], 4),
+            "selected": int(selection.selected[i]),
+            "posture_error_deg": float(np.round(deg_eps[i], 3)),
+            "bone_errors_deg": _r(deg_bones[i], 3),
+            "flags": list(selection.flags[i]),
+        }
+        if score is not None:
+            f["score_deg"] = float(np.round(score[i], 3))
+        frames.append(f)
+    names = list(domain.segment_names) if domain is not None and domain.segment_names else []
+    segments = []
+    for j, s in enumerate(selection.segments):
+        bone_deg = np.degrees(s.bone_mean_errors)
+        seg: dict[str, Any] = {
+            "reference_start": s.reference_start + reference_frame_offset,
+            "reference_end": s.reference_end + reference_frame_offset,
+            "performer_start": s.performer_start + video_frame_offset,
+            "performer_end": s.performer_end + video_frame_offset,
+            "mean_error_deg": float(np.round(np.degrees(s.mean_error), 3)),
+            "bone_mean_errors_deg": _r(bone_deg, 3),
+            "name": names[j] if j < len(names) else (s.name or f"segment {j + 1}"),
+            "status": s.status,
+            "tempo": float(np.round(s.tempo, 4)),
+            "worst_frame": s.worst_frame + video_frame_offset,
+            "worst_bones": [BONE_NAMES[b] for b in np.argsort(-bone_deg)[:3]],
+            "initial_performer_start": s.initial_performer_start + video_frame_offset,
+            "boundary_found": s.boundary_found,
+            "path_cost": float(np.round(s.cost, 6)),
+        }
+        if domain is not None:
+            seg["score_deg"] = float(np.round(np.degrees(domain.score(s.bone_mean_errors)), 3))
+        segments.append(seg)
+    messages = list(selection.messages)
+    status = "ok"
+    if any("very different" in m for m in messages):
+        status = "very_different"
+    elif any(s.status != "ok" for s in selection.segments):
+        status = "segments_mismatch"
+    summary: dict[str, Any] = {
+        "status": status,
+        "mean_error_deg": float(np.round(deg_eps.mean(), 3)),
+        "messages": messages,
+    }
+    if score is not None:
+        summary["score_deg"] = float(np.round(score.mean(), 3))
+    timing = {k: float(v) for k, v in timing_s.items()}
+    timing.setdefault("total", float(sum(timing.values())))
+    cam = camera.to_dict()
+    cam.setdefault("theta_z_deg", float(np.degrees(camera.theta_z)))
+    return {
+        "version": 1,
+        "reference": {
+            "name": reference_name, "frames": int(reference_frames), "fps": float(reference_fps)
+        },
+        "video": {
+            "frames": int(video["frames"]), "fps": float(video["fps"]),
+            "width": int(video["width"]), "height": int(video["height"]),
+        },
+        "joints": list(JOINTS),
+        "bones": list(BONE_NAMES),
+        "camera": cam,
+        "frames": frames,
+        "segments": segments,
+        "summary": summary,
+        "domain": domain.to_dict() if domain is not None else None,
+        "timing_s": timing,
+    }  # fmt: skip
+
+
+@lru_cache(maxsize=1)
+def load_schema() -> dict[str, Any]:
+    """The result JSON schema (draft 2020-12)."""
+    return json.loads(SCHEMA_PATH.read_text(encoding="utf-8"))
+
+
+def validate_result(doc: Any) -> None:
+    """Check a result document against the schema and its cross-field rules.
+
+    Raises
+    ------
+    InvalidInput
+        Naming the JSON path of the first problem.
+    """
+    import jsonschema  # only needed when results are checked
+
+    validator = jsonschema.Draft202012Validator(load_schema())
+    err = next(iter(sorted(validator.iter_errors(doc), key=lambda e: list(e.absolute_path))), None)
+    if err is not None:
+        where = "/".join(str(p) for p in err.absolute_path) or "(root)"
+        raise InvalidInput(f"result {where}: {err.message}")
+    if doc["joints"] != list(JOINTS):
+        raise InvalidInput(f"result joints: expected {list(JOINTS)}")
+    for i, f in enumerate(doc["frames"]):
+        if f["selected"] >= len(f["candidates"]):
+            raise InvalidInput(
+                f"result frames/{i}/selected: {f['selected']} is not an index into "
+                f"{len(f['candidates'])} candidates"
+            )
+    for i, s in enumerate(doc["segments"]):
+        if s["performer_end"] < s["performer_start"] or s["reference_end"] < s["reference_start"]:
+            raise InvalidInput(f"result segments/{i}: a segment ends before it starts")
+
+
+def write_result(doc: Mapping[str, Any], path: str | os.PathLike) -> Path:
+    """Validate and write a result atomically (temporary name, then rename)."""
+    validate_result(doc)
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=out.name + ".", suffix=".tmp", dir=out.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            json.dump(doc, fh, separators=(",", ":"))
+        os.replace(tmp, out)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return out
+
+
+def read_result(path: str | os.PathLike) -> dict[str, Any]:
+    """Read and validate a result file.
+
+    Raises
+    ------
+    InvalidInput
+        Missing file, not JSON, or not a valid result.
+    """
+    p = Path(path)
+    try:
+        doc = json.loads(p.read_text(encoding="utf-8"))
+    except FileNotFoundError as exc:
+        raise InvalidInput(f"result file {p} does not exist") from exc
+    except json.JSONDecodeError as exc:
+        raise InvalidInput(f"result file {p}: not valid JSON ({exc})") from exc
+    validate_result(doc)
+    return doc
+
+
+def write_text(text: str, path: str | os.PathLike) -> Path:
+    """Write a text artefact (the HTML report) atomically."""
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(out.name + ".tmp")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, out)
+    return out
+
+
+__all__ = [
+    "SCHEMA_PATH",
+    "build_result",
+    "load_schema",
+    "read_result",
+    "validate_result",
+    "write_result",
+    "write_text",
+]

@@ -1,0 +1,224 @@
+"""Per-reference domain knowledge (thesis 6.8), read from ``<ref>.domain.json`` beside the BVH.
+
+A coach states what matters in this motion: segment names, per-bone weights (the torso
+matters more than the knees in Taichi) and per-bone tolerances in degrees (a "high" or "low"
+stance is both fine). They change the *reported score* only, never the raw errors::
+
+    {
+      "version": 1,
+      "sport": "golf",
+      "segment_names": ["address", "takeaway", "top", "downswing", "impact", "finish"],
+      "bone_weights": {"hip->lower_chest": 3, "l_elbow": 2},
+      "tolerances_deg": {"l_knee": 15, "r_knee": 15},
+      "default_tolerance_deg": 0,
+      "boundary": {"joints": ["r_wrist"], "direction_change_deg": 120}
+    }
+
+Bones are named either ``parent->child`` (:data:`engine.body.skeleton.BONE_NAMES`) or by the
+joint they end at (``"l_elbow"`` = upper arm ``l_shoulder->l_elbow``). Unnamed bones get weight
+1 and ``default_tolerance_deg``.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from engine.body.skeleton import BONE_NAMES, JOINT_INDEX, JOINTS, N_BONES
+from engine.errors import InvalidInput
+
+GOLF_SEGMENT_NAMES = ("address", "takeaway", "top", "downswing", "impact", "finish")
+_KEYS = {
+    "version", "sport", "segment_names", "bone_weights", "tolerances_deg",
+    "default_tolerance_deg", "boundary", "notes",
+}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Domain:
+    """Domain knowledge of one reference (thesis 6.8).
+
+    Attributes
+    ----------
+    sport : str
+    segment_names : tuple of str
+        One per reference segment, or empty to keep the reference's own names.
+    bone_weights : ndarray, shape (16,)
+        Non-negative, at least one positive.
+    tolerances : ndarray, shape (16,)
+        Radians: an angle up to this is not counted in the score.
+    boundary_joints : tuple of str
+        Joints whose direction change marks a boundary (empty: stage-4 default).
+    direction_change_deg : float or None
+        Boundary threshold (thesis 5.4.2: 60 Taichi, 120 golf); None: stage-4 default.
+    """
+
+    sport: str = ""
+    segment_names: tuple[str, ...] = ()
+    bone_weights: np.ndarray = field(default_factory=lambda: np.ones(N_BONES))
+    tolerances: np.ndarray = field(default_factory=lambda: np.zeros(N_BONES))
+    boundary_joints: tuple[str, ...] = ()
+    direction_change_deg: float | None = None
+
+    def score(self, bone_errors: np.ndarray) -> np.ndarray:
+        """Domain-specific error: weighted mean of the excess over each bone's tolerance.
+
+        Parameters
+        ----------
+        bone_errors : ndarray, shape (..., 16)
+            Raw per-bone angles, radians.
+
+        Returns
+        -------
+        score : ndarray, shape (...)
+            Radians.
+        """
+        excess = np.maximum(np.asarray(bone_errors, float) - self.tolerances, 0.0)
+        return (excess * self.bone_weights).sum(-1) / self.bone_weights.sum()
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "sport": self.sport,
+            "segment_names": list(self.segment_names),
+            "bone_weights": [float(w) for w in self.bone_weights],
+            "tolerances_deg": [float(t) for t in np.degrees(self.tolerances)],
+            "boundary_joints": list(self.boundary_joints),
+            "direction_change_deg": self.direction_change_deg,
+        }
+
+
+def _bone_index(name: str, where: str) -> int:
+    if name in BONE_NAMES:
+        return BONE_NAMES.index(name)
+    if name in JOINT_INDEX and JOINT_INDEX[name] > 0:
+        return JOINT_INDEX[name] - 1  # bone b ends at joint b + 1
+    raise InvalidInput(
+        f"{where}: unknown bone {name!r}; use 'parent->child' ({', '.join(BONE_NAMES[:2])}, ...) "
+        f"or the joint the bone ends at ({', '.join(JOINTS[1:4])}, ...)"
+    )
+
+
+def _number(value: Any, where: str, *, minimum: float = 0.0) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not np.isfinite(value):
+        raise InvalidInput(f"{where}: expected a number, got {value!r}")
+    if value < minimum:
+        raise InvalidInput(f"{where}: expected a number >= {minimum}, got {value}")
+    return float(value)
+
+
+def _per_bone(doc: Any, where: str, default: float) -> np.ndarray:
+    out = np.full(N_BONES, default)
+    if doc is None:
+        return out
+    if not isinstance(doc, dict):
+        raise InvalidInput(f"{where}: expected an object mapping bone names to numbers")
+    for name, value in doc.items():
+        out[_bone_index(str(name), where)] = _number(value, f"{where}.{name}")
+    return out
+
+
+def parse_domain(doc: Any, *, n_segments: int | None = None, source: str = "domain") -> Domain:
+    """Validate a parsed domain document (thesis 6.8).
+
+    Parameters
+    ----------
+    doc : dict
+        The JSON content.
+    n_segments : int, optional
+        Number of reference segments; when given, ``segment_names`` must match it.
+    source : str
+        Name used in error messages (the file path).
+
+    Raises
+    ------
+    InvalidInput
+        Naming the offending key.
+    """
+    if not isinstance(doc, dict):
+        raise InvalidInput(f"{source}: expected a JSON object")
+    unknown = sorted(set(doc) - _KEYS)
+    if unknown:
+        raise InvalidInput(f"{source}: unknown keys {unknown}; allowed {sorted(_KEYS)}")
+    if doc.get("version", 1) != 1:
+        raise InvalidInput(f"{source}.version: expected 1, got {doc.get('version')!r}")
+    names = doc.get("segment_names", [])
+    if not isinstance(names, list) or not all(isinstance(n, str) and n for n in names):
+        raise InvalidInput(f"{source}.segment_names: expected a list of non-empty strings")
+    if n_segments is not None and names and len(names) != n_segments:
+        raise InvalidInput(
+            f"{source}.segment_names: the reference has {n_segments} segments, "
+            f"got {len(names)} names"
+        )
+    weights = _per_bone(doc.get("bone_weights"), f"{source}.bone_weights", 1.0)
+    if weights.sum() <= 0:
+        raise InvalidInput(f"{source}.bone_weights: at least one weight must be positive")
+    default_tol = _number(doc.get("default_tolerance_deg", 0.0), f"{source}.default_tolerance_deg")
+    tol = _per_bone(doc.get("tolerances_deg"), f"{source}.tolerances_deg", default_tol)
+    if (tol > 180).any():
+        raise InvalidInput(f"{source}.tolerances_deg: tolerances must be at most 180 deg")
+    boundary = doc.get("boundary", {})
+    if not isinstance(boundary, dict) or set(boundary) - {"joints", "direction_change_deg"}:
+        raise InvalidInput(
+            f"{source}.boundary: expected {{'joints': [...], 'direction_change_deg': x}}"
+        )
+    joints = boundary.get("joints", [])
+    if not isinstance(joints, list) or any(j not in JOINT_INDEX for j in joints):
+        raise InvalidInput(f"{source}.boundary.joints: expected joint names from {list(JOINTS)}")
+    change = boundary.get("direction_change_deg")
+    if change is not None:
+        change = _number(change, f"{source}.boundary.direction_change_deg")
+        if change > 180:
+            raise InvalidInput(
+                f"{source}.boundary.direction_change_deg: expected <= 180, got {change}"
+            )
+    sport = doc.get("sport", "")
+    if not isinstance(sport, str):
+        raise InvalidInput(f"{source}.sport: expected a string")
+    return Domain(
+        sport=sport, segment_names=tuple(names), bone_weights=weights,
+        tolerances=np.radians(tol), boundary_joints=tuple(joints), direction_change_deg=change,
+    )  # fmt: skip
+
+
+def domain_path(reference_path: str | Path) -> Path:
+    """``swing.bvh`` -> ``swing.domain.json`` in the same folder."""
+    p = Path(reference_path)
+    return p.with_name(p.stem + ".domain.json")
+
+
+def load_domain(path: str | Path, *, n_segments: int | None = None) -> Domain:
+    """Read and validate a domain file.
+
+    Raises
+    ------
+    InvalidInput
+        If the file is missing, not JSON, or invalid (see :func:`parse_domain`).
+    """
+    p = Path(path)
+    try:
+        doc = json.loads(p.read_text(encoding="utf-8"))
+    except FileNotFoundError as exc:
+        raise InvalidInput(f"domain file {p} does not exist") from exc
+    except json.JSONDecodeError as exc:
+        raise InvalidInput(f"domain file {p}: not valid JSON ({exc})") from exc
+    return parse_domain(doc, n_segments=n_segments, source=str(p))
+
+
+def find_domain(reference_path: str | Path, *, n_segments: int | None = None) -> Domain | None:
+    """The domain file beside a reference, or None when there is none."""
+    p = domain_path(reference_path)
+    return load_domain(p, n_segments=n_segments) if p.exists() else None
+
+
+__all__ = [
+    "GOLF_SEGMENT_NAMES",
+    "Domain",
+    "domain_path",
+    "find_domain",
+    "load_domain",
+    "parse_domain",
+]

@@ -1,0 +1,238 @@
+"""One self-contained HTML page of an analysis (thesis 5.5.3 figures, 6.10 visualisation).
+
+The page holds a contact strip (video frames with the selected skeleton drawn over them, bones
+coloured green to red by their error), a plot of eps_t' over time with the performer's segments
+as bands (fig. 5.26), and per segment its tempo, mean error and worst bones. Every image is
+inline (base64 PNG); the page loads nothing else. Building only: writing is in
+:func:`engine.io.result.write_text`.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+from collections.abc import Sequence
+from typing import Any
+
+import cv2
+import numpy as np
+
+from engine.body.skeleton import BONE_CHILD, BONE_NAMES, BONE_PARENT
+
+#: Error (deg) at which a bone is fully red in the overlays and the 3D view.
+ERROR_RED_DEG = 45.0
+
+
+def error_colors(errors_deg: np.ndarray, red_at_deg: float = ERROR_RED_DEG) -> np.ndarray:
+    """Green (0 deg) -> yellow -> red (``red_at_deg`` and above), RGB in [0, 1].
+
+    Parameters
+    ----------
+    errors_deg : ndarray, shape (...)
+
+    Returns
+    -------
+    rgb : ndarray, shape (..., 3)
+    """
+    x = np.clip(np.asarray(errors_deg, float) / red_at_deg, 0.0, 1.0)
+    r = np.clip(2 * x, 0, 1)
+    g = np.clip(2 * (1 - x), 0, 1)
+    return np.stack([r, g, np.zeros_like(x)], -1) * 0.9 + 0.05
+
+
+def _png_b64(rgb: np.ndarray) -> str:
+    ok, buf = cv2.imencode(".png", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+    if not ok:  # pragma: no cover - cv2 encodes any uint8 image
+        raise RuntimeError("PNG encoding failed")
+    return base64.b64encode(buf.tobytes()).decode("ascii")
+
+
+def draw_skeleton(
+    rgb: np.ndarray, joints_2d: np.ndarray, bone_errors_deg: np.ndarray
+) -> np.ndarray:
+    """A copy of a video frame with the skeleton drawn over it.
+
+    Parameters
+    ----------
+    rgb : ndarray of uint8, shape (H, W, 3)
+    joints_2d : ndarray, shape (17, 2)
+        (u, v) pixels.
+    bone_errors_deg : ndarray, shape (16,)
+
+    Returns
+    -------
+    ndarray of uint8, shape (H, W, 3)
+    """
+    out = np.ascontiguousarray(rgb.copy())
+    colors = (error_colors(bone_errors_deg) * 255).astype(int)
+    thick = max(1, round(out.shape[0] / 120))
+    pts = np.round(np.asarray(joints_2d, float)).astype(int)
+    for b in range(len(BONE_NAMES)):
+        p, c = pts[BONE_PARENT[b]], pts[BONE_CHILD[b]]
+        cv2.line(
+            out,
+            (int(p[0]), int(p[1])),
+            (int(c[0]), int(c[1])),
+            tuple(map(int, colors[b])),
+            thick,
+            cv2.LINE_AA,
+        )
+    for p in pts:
+        cv2.circle(out, (int(p[0]), int(p[1])), thick, (255, 255, 255), -1, cv2.LINE_AA)
+    return out
+
+
+def _strip_frames(result: dict[str, Any], n: int) -> list[int]:
+    """Indices into result["frames"]: segment starts, worst frames, then evenly spaced."""
+    t_to_i = {f["t"]: i for i, f in enumerate(result["frames"])}
+    picks: list[int] = []
+    for s in result["segments"]:
+        for t in (s["performer_start"], s.get("worst_frame")):
+            if t in t_to_i and t_to_i[t] not in picks:
+                picks.append(t_to_i[t])
+    even = np.linspace(0, len(result["frames"]) - 1, n).round().astype(int)
+    picks += [int(i) for i in even if int(i) not in picks]
+    return sorted(picks[:n])
+
+
+def _error_plot_png(result: dict[str, Any]) -> str:
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    from matplotlib.figure import Figure
+
+    t = np.array([f["t"] for f in result["frames"]])
+    eps = np.array([f["posture_error_deg"] for f in result["frames"]])
+    fig = Figure(figsize=(8, 2.6), dpi=100)
+    ax = fig.add_subplot()
+    for j, s in enumerate(result["segments"]):
+        ax.axvspan(s["performer_start"], s["performer_end"], color=f"C{j % 10}", alpha=0.12, lw=0)
+        mid = (s["performer_start"] + s["performer_end"]) / 2
+        ax.text(mid, 1.0, s.get("name", str(j + 1)), transform=ax.get_xaxis_transform(),
+                ha="center", va="bottom", fontsize=8)  # fmt: skip
+    ax.plot(t, eps, color="k", lw=1.2, label="posture error eps_t'")
+    if "score_deg" in result["frames"][0]:
+        ax.plot(
+            t,
+            [f["score_deg"] for f in result["frames"]],
+            color="C3",
+            lw=1,
+            ls="--",
+            label="domain score",
+        )
+    ax.set_xlabel("video frame t'")
+    ax.set_ylabel("deg")
+    ax.set_xlim(t.min(), max(t.max(), t.min() + 1))
+    ax.set_ylim(bottom=0)
+    ax.legend(loc="upper left", fontsize=8, frameon=False)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    return base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def build_report_html(
+    result: dict[str, Any],
+    video_frames: Sequence[np.ndarray] | None = None,
+    *,
+    strip_frames: int = 8,
+) -> str:
+    """The HTML report of one analysis.
+
+    Parameters
+    ----------
+    result : dict
+        A result document (:func:`engine.io.result.build_result`).
+    video_frames : sequence of ndarray of uint8, shape (H, W, 3), optional
+        RGB frames indexed like ``result["frames"]``; without them the strip shows the
+        skeletons on a grey background.
+    strip_frames : int
+        Frames in the contact strip.
+
+    Returns
+    -------
+    str
+        A complete HTML document with every image inline.
+    """
+    e = html.escape
+    frames = result["frames"]
+    w, h = int(result["video"]["width"]), int(result["video"]["height"])
+    strip = []
+    for i in _strip_frames(result, strip_frames):
+        f = frames[i]
+        img = (
+            np.asarray(video_frames[i], np.uint8)
+            if video_frames is not None and i < len(video_frames)
+            else np.full((h, w, 3), 60, np.uint8)
+        )
+        drawn = draw_skeleton(img, np.asarray(f["joints_2d"]), np.asarray(f["bone_errors_deg"]))
+        cap = f"t'={f['t']} &rarr; t={f['reference_frame']}, {f['posture_error_deg']:.1f}&deg;"
+        strip.append(
+            f'<figure><img alt="frame {f["t"]}" src="data:image/png;base64,{_png_b64(drawn)}">'
+            f"<figcaption>{cap}</figcaption></figure>"
+        )
+    rows = []
+    for j, s in enumerate(result["segments"]):
+        worst = ", ".join(
+            f"{e(BONE_NAMES[b])} ({s['bone_mean_errors_deg'][b]:.0f}&deg;)"
+            for b in np.argsort(-np.asarray(s["bone_mean_errors_deg"]))[:3]
+        )
+        status = s.get("status", "ok")
+        score = f"{s['score_deg']:.1f}" if "score_deg" in s else "&ndash;"
+        rows.append(
+            f"<tr class='{e(status)}'><td>{e(s.get('name', str(j + 1)))}</td>"
+            f"<td>{s['reference_start']}&ndash;{s['reference_end']}</td>"
+            f"<td>{s['performer_start']}&ndash;{s['performer_end']}</td>"
+            f"<td>{s.get('tempo', float('nan')):.2f}</td><td>{s['mean_error_deg']:.1f}</td>"
+            f"<td>{score}</td><td>{e(status)}</td><td>{worst}</td></tr>"
+        )
+    summary = result.get("summary", {})
+    messages = "".join(f"<p class='msg'>{e(m)}</p>" for m in summary.get("messages", []))
+    timing = ", ".join(f"{e(k)} {v:.2f} s" for k, v in result.get("timing_s", {}).items())
+    legend = "".join(
+        f"<span style='background:rgb{tuple(int(c * 255) for c in rgb)}'>{d:.0f}&deg;</span>"
+        for d, rgb in zip(
+            np.linspace(0, ERROR_RED_DEG, 6),
+            error_colors(np.linspace(0, ERROR_RED_DEG, 6)),
+            strict=True,
+        )
+    )
+    mean_deg = summary.get(
+        "mean_error_deg", float(np.mean([f["posture_error_deg"] for f in frames]))
+    )
+    head = (
+        f"{len(frames)} video frames at {result['video']['fps']:g} fps against "
+        f"{result['reference']['frames']} reference frames at {result['reference']['fps']:g} fps. "
+        f"Mean posture error {mean_deg:.1f}&deg;."
+    )
+    columns = "".join(
+        f"<th>{c}</th>" for c in ("segment", "reference", "performer", "tempo",
+                                  "mean error (&deg;)", "score (&deg;)", "status", "worst bones")
+    )  # fmt: skip
+    title = f"Motion analysis: {e(result['reference']['name'])}"
+    return f"""<!doctype html>
+<html lang="en"><head><meta charset="utf-8"><title>{title}</title>
+<style>
+body{{font-family:system-ui,sans-serif;margin:1.5em;color:#222}}
+.strip{{display:flex;flex-wrap:wrap;gap:6px}} figure{{margin:0}}
+figure img{{width:{min(w, 200)}px;display:block}} figcaption{{font-size:11px}}
+table{{border-collapse:collapse}} td,th{{border:1px solid #ccc;padding:3px 8px;font-size:13px}}
+tr.missing td,tr.extra_motion td{{background:#fde2e2}} .msg{{color:#a00;font-weight:600}}
+.legend span{{display:inline-block;padding:0 6px;font-size:11px}}
+</style></head><body>
+<h1>{title}</h1>
+<p>{head}</p>
+{messages}
+<h2>Frames</h2><div class="legend">bone error: {legend}</div>
+<div class="strip">{"".join(strip)}</div>
+<h2>Posture error over time</h2>
+<img alt="posture error" src="data:image/png;base64,{_error_plot_png(result)}">
+<h2>Segments</h2>
+<table><tr>{columns}</tr>{"".join(rows)}</table>
+<p><small>Timing: {timing}</small></p>
+</body></html>
+"""
+
+
+__all__ = ["ERROR_RED_DEG", "build_report_html", "draw_skeleton", "error_colors"]

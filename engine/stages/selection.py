@@ -1,0 +1,601 @@
+"""Stage 4: performer segment boundaries, candidate selection, refined C, posture errors.
+
+Thesis 4.7 (4.7.1 boundaries, 4.7.2 per-segment DP, eq. 4.22-4.30), with the constraints of
+2.1.6 (B temporal order, C boundary similarity, D small rate of change of errors) and three
+additions from chapter 6:
+
+- 6.6 missing or extraneous segments are *detected and reported* (a performer segment far too
+  short is "missing", far too long is "extra_motion") instead of being forced to match;
+- 6.7 a performer whose selected postures are far from the reference everywhere gets one
+  overall message (``Selection.messages``) rather than a per-bone list of noise;
+- 2.1.3 item 4: a performer who pauses at a boundary (a run of unchanged postures) has the
+  pause reduced to its first frame, whose in/out motion directions are those around the pause.
+
+Everything here works on joint positions in the world frame, shape (..., 17, 3); errors are in
+radians (degrees only in :mod:`engine.io.result`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from engine.body.kinematics import bone_directions
+from engine.body.skeleton import JOINT_INDEX, N_JOINTS
+from engine.errors import InvalidInput
+from engine.types import Segments
+
+ProgressFn = Callable[[str, float], None]
+
+
+@dataclass(frozen=True)
+class SelectionSettings:
+    """Tuning of stage 4; defaults are the thesis' values where it gives them.
+
+    Attributes
+    ----------
+    window_k : float
+        Window factor k of the per-segment DP, w = k L_i / L'_i (thesis 5.5.3: k = 10).
+    band : float
+        Normalised bandwidth beta_i / L_i around the segment diagonal (thesis 5.5.3: 25 %).
+    boundary_window : int
+        Half-width omega of the boundary search window, video frames (thesis 4.7.1 step 2).
+    smooth_threshold_deg : float
+        Largest d_B between consecutive candidates of a "smooth" sequence (4.7.1 step 3).
+    boundary_joints : tuple of str
+        Joints whose velocity direction change marks a boundary (5.4.2: the right wrist).
+    direction_change_deg : float
+        Minimum direction change at a boundary: tau = cos(this) (2.1.1 item 4; 60 deg Taichi,
+        120 deg golf).
+    pause_speed : float
+        Joint speed (metres per video frame, relative to the hip) below which the performer is
+        considered still (2.1.3 item 4).
+    missing_tempo : float
+        A segment whose tempo is below this fraction of the median tempo, or shorter than
+        ``min_segment_frames``, is reported missing (6.6).
+    extra_tempo : float
+        A segment whose tempo is above this multiple of the median tempo is reported as
+        containing extraneous motion (6.6).
+    min_segment_frames : int
+        Fewest video frames a performed segment spans (end - start).
+    large_error_deg : float
+        Mean posture error above which the performance is "very different" (6.7).
+    """
+
+    window_k: float = 10.0
+    band: float = 0.25
+    boundary_window: int = 8
+    smooth_threshold_deg: float = 25.0
+    boundary_joints: tuple[str, ...] = ("l_wrist", "r_wrist")
+    direction_change_deg: float = 60.0
+    pause_speed: float = 0.004
+    missing_tempo: float = 0.25
+    extra_tempo: float = 3.0
+    min_segment_frames: int = 2
+    large_error_deg: float = 40.0
+
+
+@dataclass(frozen=True)
+class SegmentReport:
+    """One performed segment (thesis 4.7; 6.6 status).
+
+    Attributes
+    ----------
+    reference_start, reference_end : int
+        Reference boundary frames (inclusive).
+    performer_start, performer_end : int
+        Performer boundary frames (inclusive).
+    initial_performer_start : int
+        The stage-2 estimate of ``performer_start`` (4.7.1 step 1).
+    name : str
+    status : str
+        "ok", "missing" or "extra_motion" (6.6).
+    boundary_found : bool
+        Whether the start boundary satisfied the velocity condition (else best-posture fallback).
+    tempo : float
+        Performer duration / reference duration (seconds over seconds).
+    mean_error : float
+        Mean eps_t' over the segment, radians.
+    bone_mean_errors : ndarray, shape (16,)
+        Radians.
+    worst_frame : int
+        Video frame of the largest eps_t' in the segment.
+    cost : float
+        E_F of eq. 4.24 along the chosen path.
+    """
+
+    reference_start: int
+    reference_end: int
+    performer_start: int
+    performer_end: int
+    initial_performer_start: int
+    name: str
+    status: str
+    boundary_found: bool
+    tempo: float
+    mean_error: float
+    bone_mean_errors: np.ndarray
+    worst_frame: int
+    cost: float
+
+
+@dataclass(frozen=True)
+class Selection:
+    """Output of stage 4.
+
+    Attributes
+    ----------
+    performer_segments : Segments
+        Performer boundaries (video frames), names from the reference segments.
+    C : ndarray of int, shape (T',)
+        Refined temporal correspondence C(t').
+    selected : ndarray of int, shape (T',)
+        Selected candidate l(t').
+    joints : ndarray, shape (T', 17, 3)
+        Selected postures B'_{t' l(t')}.
+    posture_error : ndarray, shape (T',)
+        eps_t' = d_B(B_C(t'), B'_t'), radians.
+    bone_errors : ndarray, shape (T', 16)
+        Per-bone angle, radians.
+    flags : tuple of tuple of str
+        Per video frame.
+    segments : tuple of SegmentReport
+    messages : tuple of str
+        Overall messages for the performer (6.6, 6.7).
+    """
+
+    performer_segments: Segments
+    C: np.ndarray
+    selected: np.ndarray
+    joints: np.ndarray
+    posture_error: np.ndarray
+    bone_errors: np.ndarray
+    flags: tuple[tuple[str, ...], ...]
+    segments: tuple[SegmentReport, ...]
+    messages: tuple[str, ...] = field(default=())
+
+
+# --------------------------------------------------------------------------- validation
+
+
+def _validate(
+    candidates: Sequence[np.ndarray],
+    reference_joints: np.ndarray,
+    reference_segments: Segments,
+    C_initial: np.ndarray,
+    fps_ratio: float,
+) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
+    ref = np.asarray(reference_joints, dtype=float)
+    if ref.ndim != 3 or ref.shape[1:] != (N_JOINTS, 3) or ref.shape[0] < 2:
+        raise InvalidInput(f"reference_joints: expected shape (T>=2, 17, 3), got {ref.shape}")
+    if len(candidates) < 2:
+        raise InvalidInput(f"candidates: need at least 2 video frames, got {len(candidates)}")
+    cands = []
+    for i, c in enumerate(candidates):
+        a = np.asarray(c, dtype=float)
+        if a.ndim != 3 or a.shape[1:] != (N_JOINTS, 3) or a.shape[0] < 1:
+            raise InvalidInput(f"candidates[{i}]: expected shape (K>=1, 17, 3), got {a.shape}")
+        cands.append(a)
+    C0 = np.asarray(C_initial, dtype=float)
+    if C0.shape != (len(cands),):
+        raise InvalidInput(f"C_initial: expected shape ({len(cands)},), got {C0.shape}")
+    starts = reference_segments.starts
+    if (
+        not starts
+        or list(starts) != sorted(set(starts))
+        or starts[0] < 0
+        or reference_segments.end <= starts[-1]
+        or reference_segments.end >= ref.shape[0]
+    ):
+        raise InvalidInput(
+            f"reference_segments: starts must increase within [0, {ref.shape[0] - 1}] and end "
+            f"after the last start, got starts={starts} end={reference_segments.end}"
+        )
+    if not np.isfinite(fps_ratio) or fps_ratio <= 0:
+        raise InvalidInput(f"fps_ratio: expected a positive number, got {fps_ratio}")
+    return cands, ref, C0
+
+
+def _pad(candidates: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Candidates padded to (T', K_max, 17, 3) and a validity mask (T', K_max)."""
+    k = max(c.shape[0] for c in candidates)
+    out = np.zeros((len(candidates), k, N_JOINTS, 3))
+    valid = np.zeros((len(candidates), k), dtype=bool)
+    for i, c in enumerate(candidates):
+        out[i, : c.shape[0]] = c
+        out[i, c.shape[0] :] = c[0]
+        valid[i, : c.shape[0]] = True
+    return out, valid
+
+
+def _angles(dirs_a: np.ndarray, dirs_b: np.ndarray) -> np.ndarray:
+    """Bone angles from unit bone directions (..., 16, 3) -> (..., 16), radians."""
+    return np.arccos(np.clip(np.sum(dirs_a * dirs_b, -1), -1.0, 1.0))
+
+
+# --------------------------------------------------------------------------- 4.7.1
+
+
+def _smooth_sequences(dirs: np.ndarray, valid: np.ndarray, threshold: float) -> np.ndarray:
+    """Smooth candidate sequences over a window (thesis 4.7.1 step 3).
+
+    Viterbi over the window with transition cost d_B between consecutive candidates; one
+    sequence per candidate at the window's last frame, kept when every step stays below
+    ``threshold``.
+
+    Parameters
+    ----------
+    dirs : ndarray, shape (n, K, 16, 3)
+        Bone directions of the window's candidates.
+    valid : ndarray of bool, shape (n, K)
+    threshold : float
+        Radians.
+
+    Returns
+    -------
+    sequences : ndarray of int, shape (M, n)
+        Candidate index per window frame, M >= 1 (the smoothest is kept even above threshold).
+    """
+    n, k = valid.shape
+    cost = np.where(valid[0], 0.0, np.inf)
+    worst = np.zeros(k)
+    back = np.zeros((n, k), dtype=int)
+    for i in range(1, n):
+        step = _angles(dirs[i - 1][:, None], dirs[i][None]).mean(-1)  # (K_prev, K)
+        total = cost[:, None] + step
+        back[i] = np.argmin(total, axis=0)
+        cost = np.where(valid[i], total[back[i], np.arange(k)], np.inf)
+        worst = np.maximum(worst[back[i]], step[back[i], np.arange(k)])
+    paths = np.empty((k, n), dtype=int)
+    paths[:, -1] = np.arange(k)
+    for i in range(n - 1, 0, -1):
+        paths[:, i - 1] = back[i, paths[:, i]]
+    keep = np.isfinite(cost) & (worst <= threshold)
+    if not keep.any():
+        keep = cost == cost.min()
+    return np.unique(paths[keep], axis=0)
+
+
+def _boundary_frames(rel: np.ndarray, cos_tau: float, pause_speed: float) -> np.ndarray:
+    """Frames of a sequence that satisfy the boundary condition (thesis 2.1.6 C).
+
+    v_tau . v_tau+1 < tau for any boundary joint, with directions taken from the last moving
+    velocity before and the first moving velocity after, so a pause (2.1.3 item 4) counts as a
+    boundary at its first still frame.
+
+    Parameters
+    ----------
+    rel : ndarray, shape (n, J_b, 3)
+        Boundary joints relative to the hip along one smooth sequence.
+
+    Returns
+    -------
+    frames : ndarray of int
+        Window-relative indices tau in [1, n-2].
+    """
+    n = rel.shape[0]
+    if n < 3:
+        return np.zeros(0, dtype=int)
+    v = np.diff(rel, axis=0)  # v[i] = motion from i to i+1, (n-1, J_b, 3)
+    speed = np.linalg.norm(v, axis=-1)
+    moving = speed > pause_speed
+    unit = v / np.maximum(speed, 1e-12)[..., None]
+    # last moving velocity arriving at tau (index <= tau-1), first leaving it (index >= tau)
+    idx = np.arange(n - 1)[:, None].repeat(rel.shape[1], 1)
+    last_in = np.maximum.accumulate(np.where(moving, idx, -1), axis=0)
+    first_out = np.minimum.accumulate(np.where(moving, idx, n)[::-1], axis=0)[::-1]
+    taus = np.arange(1, n - 1)
+    li, fo = last_in[taus - 1], first_out[taus]
+    ok = (li >= 0) & (fo < n - 1)
+    j = np.arange(rel.shape[1])
+    cos = np.sum(unit[np.clip(li, 0, n - 2), j] * unit[np.clip(fo, 0, n - 2), j], -1)
+    hit = (ok & (cos < cos_tau)).any(-1)
+    # a still run is one boundary: keep only the first frame of a run of hits that is still
+    still_at = ~moving[taus].any(-1) & ~moving[taus - 1].any(-1)
+    first_of_run = hit & ~(still_at & np.r_[False, hit[:-1]])
+    return taus[first_of_run]
+
+
+def _find_boundary(
+    lo: int,
+    hi: int,
+    t_ref: int,
+    ref_dirs: np.ndarray,
+    cand_dirs: np.ndarray,
+    cand_joints: np.ndarray,
+    valid: np.ndarray,
+    s: SelectionSettings,
+    joint_ids: np.ndarray,
+) -> tuple[int, bool]:
+    """Performer boundary for reference boundary ``t_ref`` in [lo, hi].
+
+    Thesis 4.7.1 steps 3-5, eq. 4.23; returns (frame, whether the velocity condition held).
+    """
+    seqs = _smooth_sequences(
+        cand_dirs[lo : hi + 1], valid[lo : hi + 1], np.radians(s.smooth_threshold_deg)
+    )
+    frames = np.arange(lo, hi + 1)
+    best: tuple[float, int] | None = None
+    fallback: tuple[float, int] | None = None
+    for seq in seqs:
+        joints = cand_joints[frames, seq]
+        rel = joints[:, joint_ids] - joints[:, :1]
+        err = _angles(ref_dirs[t_ref][None], cand_dirs[frames, seq]).mean(-1)  # d_B(B_t, B'_i)
+        for tau in _boundary_frames(rel, np.cos(np.radians(s.direction_change_deg)), s.pause_speed):
+            if best is None or err[tau] < best[0]:
+                best = (float(err[tau]), int(lo + tau))
+        i = int(np.argmin(err))
+        if fallback is None or err[i] < fallback[0]:
+            fallback = (float(err[i]), int(lo + i))
+    if best is not None:
+        return best[1], True
+    assert fallback is not None  # seqs is never empty
+    return fallback[1], False
+
+
+def _initial_boundary(C0: np.ndarray, t_ref: int) -> int:
+    """First video frame whose C reaches ``t_ref`` (4.7.1 step 1)."""
+    hit = np.flatnonzero(C0 >= t_ref)
+    return int(hit[0]) if hit.size else len(C0) - 1
+
+
+# --------------------------------------------------------------------------- 4.7.2
+
+
+def refine_segment(
+    d_c: np.ndarray, *, window: int, band: int, min_step: int = 1
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Least-cost path over (t', t, l) in one segment (thesis 4.7.2, eq. 4.24-4.30).
+
+    The path starts at (0, 0, l) and ends at (n'-1, n-1, l): C(t'_b) = t_b and C(t'_e) = t_e.
+    The predecessor of (t', t, l) is (t'-1, t-i, k) with i in [min_step, window] (constraint B;
+    the thesis' i = 1..w+1), and only t within ``band`` of the segment's diagonal is searched.
+    Cost per step d_c(t', t, l) + (d_c(t', t, l) - d_c(t'-1, s, k))^2 (eq. 4.25, 4.26).
+    Complexity O(w beta L'_B N_B^2).
+
+    Parameters
+    ----------
+    d_c : ndarray, shape (n', n, K)
+        Posture error of candidate l at t' against reference frame t (radians); ``inf`` marks
+        absent candidates.
+    window : int
+        w >= 1.
+    band : int
+        beta, reference frames either side of the diagonal.
+    min_step : int
+        0 lets C hold still (slower performer than the reference's frame rate allows).
+
+    Returns
+    -------
+    C : ndarray of int, shape (n',)
+        Reference frame per video frame, relative to the segment start.
+    ell : ndarray of int, shape (n',)
+        Selected candidate.
+    cost : float
+        Sum of the step costs (E_F times n'); ``inf`` when no path exists.
+    """
+    n_v, n_r, k = d_c.shape
+    if n_v == 1:
+        l0 = int(np.argmin(d_c[0, 0]))
+        return np.zeros(1, dtype=int), np.array([l0]), float(d_c[0, 0, l0])
+    diag = np.linspace(0.0, n_r - 1, n_v)
+    t_idx = np.arange(n_r)
+    D = np.full((n_r, k), np.inf)
+    D[0] = d_c[0, 0]
+    back_i = np.zeros((n_v, n_r, k), dtype=np.int32)
+    back_k = np.zeros((n_v, n_r, k), dtype=np.int32)
+    for tp in range(1, n_v):
+        allowed = np.abs(t_idx - diag[tp]) <= band
+        if tp == n_v - 1:
+            allowed = t_idx == n_r - 1
+        cur = d_c[tp]  # (n, K)
+        best = np.full((n_r, k), np.inf)
+        bi = np.zeros((n_r, k), dtype=np.int32)
+        bk = np.zeros((n_r, k), dtype=np.int32)
+        for i in range(min_step, window + 1):
+            if i >= n_r:
+                break
+            prev_D = np.full((n_r, k), np.inf)
+            prev_e = np.zeros((n_r, k))
+            prev_D[i:] = D[: n_r - i]
+            prev_e[i:] = d_c[tp - 1, : n_r - i]
+            # (n, K_prev, K): D(t'-1, t-i, k) + (d_c(t', t, l) - d_c(t'-1, t-i, k))^2
+            diff = cur[:, None, :] - prev_e[:, :, None]
+            tot = prev_D[:, :, None] + np.where(np.isfinite(diff), diff * diff, np.inf)
+            kk = np.argmin(tot, axis=1)
+            val = np.take_along_axis(tot, kk[:, None, :], 1)[:, 0]
+            better = val < best
+            best = np.where(better, val, best)
+            bi = np.where(better, i, bi)
+            bk = np.where(better, kk, bk)
+        D = np.where(allowed[:, None], best + cur, np.inf)
+        back_i[tp], back_k[tp] = bi, bk
+    l_end = int(np.argmin(D[n_r - 1]))
+    cost = float(D[n_r - 1, l_end])
+    C = np.empty(n_v, dtype=int)
+    ell = np.empty(n_v, dtype=int)
+    C[-1], ell[-1] = n_r - 1, l_end
+    for tp in range(n_v - 1, 0, -1):
+        i, kk = back_i[tp, C[tp], ell[tp]], back_k[tp, C[tp], ell[tp]]
+        C[tp - 1], ell[tp - 1] = C[tp] - i, kk
+    return C, ell, cost
+
+
+def _segment_table(ref_dirs: np.ndarray, cand_dirs: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """d_c(t', t, l) for one segment, shape (n', n, K) (eq. 4.25)."""
+    out = np.empty((cand_dirs.shape[0], ref_dirs.shape[0], cand_dirs.shape[1]))
+    for i in range(cand_dirs.shape[0]):
+        out[i] = _angles(ref_dirs[:, None], cand_dirs[i][None]).mean(-1)
+    return np.where(valid[:, None, :], out, np.inf)
+
+
+# --------------------------------------------------------------------------- public
+
+
+def select_and_refine(
+    candidates: Sequence[np.ndarray],
+    reference_joints: np.ndarray,
+    reference_segments: Segments,
+    C_initial: np.ndarray,
+    *,
+    settings: SelectionSettings | None = None,
+    fps_ratio: float = 1.0,
+    candidate_flags: Sequence[Sequence[str]] | None = None,
+    on_progress: ProgressFn | None = None,
+) -> Selection:
+    """Stage 4: boundaries, candidate selection, refined C and posture errors (thesis 4.7).
+
+    Parameters
+    ----------
+    candidates : list of ndarray, shape (K_t', 17, 3) each
+        Posture candidates per video frame, world frame (stage 3).
+    reference_joints : ndarray, shape (T, 17, 3)
+        Reference postures B_t.
+    reference_segments : Segments
+        Reference boundaries T_b (frame numbers of ``reference_joints``).
+    C_initial : ndarray, shape (T',)
+        Approximate correspondence from stage 2 (may be fractional).
+    settings : SelectionSettings, optional
+    fps_ratio : float
+        Reference fps / video fps, for tempo.
+    candidate_flags : list of list of str, optional
+        Stage-3 flags per video frame, passed through.
+    on_progress : callable(stage, fraction), optional
+
+    Returns
+    -------
+    Selection
+
+    Raises
+    ------
+    InvalidInput
+        On shapes, segments outside the reference or a non-positive ``fps_ratio``.
+    """
+    s = settings or SelectionSettings()
+    cands, ref, C0 = _validate(
+        candidates, reference_joints, reference_segments, C_initial, fps_ratio
+    )
+    unknown = [j for j in s.boundary_joints if j not in JOINT_INDEX]
+    if unknown:
+        raise InvalidInput(f"settings.boundary_joints: unknown joints {unknown}")
+    joint_ids = np.array([JOINT_INDEX[j] for j in s.boundary_joints])
+    cand_joints, valid = _pad(cands)
+    cand_dirs = bone_directions(cand_joints)
+    ref_dirs = bone_directions(ref)
+    n_v = len(cands)
+    bounds = reference_segments.bounds()
+    names = tuple(reference_segments.names) or ("",) * len(bounds)
+    if len(names) != len(bounds):
+        names = tuple(names[i] if i < len(names) else "" for i in range(len(bounds)))
+
+    # 4.7.1: performer boundaries, one per interior reference boundary, kept monotone
+    initial = [0] + [_initial_boundary(C0, t) for t, _ in bounds[1:]] + [n_v - 1]
+    p_starts = [0]
+    found = [True]
+    for j, (t_ref, _) in enumerate(bounds[1:], start=1):
+        lo = max(p_starts[-1], initial[j] - s.boundary_window)
+        hi = min(n_v - 1, initial[j] + s.boundary_window)
+        lo = min(lo, hi)
+        tau, ok = _find_boundary(
+            lo, hi, t_ref, ref_dirs, cand_dirs, cand_joints, valid, s, joint_ids
+        )
+        p_starts.append(max(tau, p_starts[-1]))
+        found.append(ok)
+        if on_progress:
+            on_progress("selection", 0.2 * j / max(len(bounds) - 1, 1))
+    p_ends = p_starts[1:] + [n_v - 1]
+    spans = list(zip(p_starts, p_ends, strict=True))
+
+    # tempo and 6.6 status
+    tempo = np.array(
+        [
+            (pe - ps) * fps_ratio / max(re - rs, 1)
+            for (ps, pe), (rs, re) in zip(spans, bounds, strict=True)
+        ]
+    )
+    median = float(np.median(tempo[tempo > 0])) if (tempo > 0).any() else 1.0
+    status = []
+    for i, (ps, pe) in enumerate(spans):
+        if pe - ps < s.min_segment_frames or tempo[i] < s.missing_tempo * median:
+            status.append("missing")
+        elif tempo[i] > s.extra_tempo * median:
+            status.append("extra_motion")
+        else:
+            status.append("ok")
+
+    # 4.7.2: DP per segment
+    C = np.zeros(n_v, dtype=int)
+    ell = np.zeros(n_v, dtype=int)
+    costs = []
+    for i, ((ps, pe), (rs, re)) in enumerate(zip(spans, bounds, strict=True)):
+        n_seg_v, n_seg_r = pe - ps + 1, re - rs + 1
+        table = _segment_table(ref_dirs[rs : re + 1], cand_dirs[ps : pe + 1], valid[ps : pe + 1])
+        min_step = 1 if n_seg_r >= n_seg_v else 0
+        window = max(1, int(np.ceil(s.window_k * n_seg_r / max(n_seg_v, 1))))
+        band = max(window, int(np.ceil(s.band * n_seg_r)))
+        c_loc, l_loc, cost = refine_segment(table, window=window, band=band, min_step=min_step)
+        if not np.isfinite(cost):  # band too narrow for this segment: search the whole segment
+            c_loc, l_loc, cost = refine_segment(table, window=n_seg_r, band=n_seg_r, min_step=0)
+        # boundary frames are shared by two segments: the later segment's start wins
+        C[ps : pe + 1] = rs + c_loc
+        ell[ps : pe + 1] = l_loc
+        costs.append(cost / n_seg_v)
+        if on_progress:
+            on_progress("selection", 0.2 + 0.8 * (i + 1) / len(bounds))
+
+    frames = np.arange(n_v)
+    joints = cand_joints[frames, ell]
+    bone_err = _angles(ref_dirs[C], cand_dirs[frames, ell])
+    eps = bone_err.mean(-1)
+
+    flags: list[list[str]] = [
+        list(candidate_flags[t]) if candidate_flags else [] for t in range(n_v)
+    ]
+    large = np.radians(s.large_error_deg)
+    for t in np.flatnonzero(eps > large):
+        flags[t].append("large_error")
+    reports = []
+    for i, ((ps, pe), (rs, re)) in enumerate(zip(spans, bounds, strict=True)):
+        sl = slice(ps, pe + 1)
+        if i > 0:
+            flags[ps].append("segment_boundary" if found[i] else "segment_boundary_estimated")
+        if status[i] != "ok":
+            for t in range(ps, pe + 1):
+                flags[t].append(f"{status[i]}_segment")
+        worst = ps + int(np.argmax(eps[sl]))
+        reports.append(
+            SegmentReport(
+                reference_start=int(rs), reference_end=int(re),
+                performer_start=int(ps), performer_end=int(pe),
+                initial_performer_start=int(initial[i]), name=names[i], status=status[i],
+                boundary_found=bool(found[i]), tempo=float(tempo[i]),
+                mean_error=float(eps[sl].mean()), bone_mean_errors=bone_err[sl].mean(0),
+                worst_frame=worst, cost=float(costs[i]),
+            )
+        )  # fmt: skip
+
+    messages = []
+    if float(eps.mean()) > large:
+        messages.append(
+            f"Your motion is very different from the reference (mean posture error "
+            f"{np.degrees(eps.mean()):.0f} deg): detailed per-bone errors are not meaningful; "
+            "check that you performed the same motion, filmed from the expected side."
+        )
+    for r in reports:
+        if r.status == "missing":
+            messages.append(f"Segment {r.name or reports.index(r) + 1} seems to be missing.")
+        elif r.status == "extra_motion":
+            messages.append(
+                f"Segment {r.name or reports.index(r) + 1} seems to contain extra motion."
+            )
+
+    return Selection(
+        performer_segments=Segments(tuple(p_starts), n_v - 1, names),
+        C=C, selected=ell, joints=joints, posture_error=eps, bone_errors=bone_err,
+        flags=tuple(tuple(f) for f in flags), segments=tuple(reports), messages=tuple(messages),
+    )  # fmt: skip
+
+
+__all__ = ["Selection", "SelectionSettings", "SegmentReport", "refine_segment", "select_and_refine"]

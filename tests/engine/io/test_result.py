@@ -1,0 +1,101 @@
+"""The result JSON: built from stage 4, valid against the schema, and invalid ones refused."""
+
+from __future__ import annotations
+
+import copy
+import json
+
+import numpy as np
+import pytest
+
+from engine.errors import InvalidInput
+from engine.io.result import build_result, read_result, validate_result, write_result
+from engine.reference.domain import parse_domain
+from engine.render.camera import Camera
+from engine.stages.selection import select_and_refine
+from engine.types import Segments
+
+BASE = np.array([
+    [0, 1, 0], [0.1, 1, 0], [0.1, 0.55, 0], [0.1, 0.1, 0], [-0.1, 1, 0], [-0.1, 0.55, 0],
+    [-0.1, 0.1, 0], [0, 1.2, 0], [0, 1.4, 0], [0.18, 1.45, 0], [0.45, 1.45, 0], [0.7, 1.45, 0],
+    [-0.18, 1.45, 0], [-0.45, 1.45, 0], [-0.7, 1.45, 0], [0, 1.55, 0], [0, 1.75, 0],
+], float)  # fmt: skip
+
+
+def _reference(n: int = 41) -> np.ndarray:
+    ang = np.linspace(0, np.pi / 2, n)
+    ref = np.repeat(BASE[None], n, 0)
+    for k, r in ((13, 0.27), (14, 0.52)):  # right arm swings up
+        ref[:, k] = BASE[12] + r * np.stack([-np.cos(ang), np.sin(ang), 0 * ang], -1)
+    return ref
+
+
+@pytest.fixture
+def result_doc(rng) -> dict:
+    ref = _reference()
+    C0 = np.arange(0, 41, 4)
+    cands = [np.stack([ref[c], ref[c] + rng.normal(0, 0.02, (17, 3))]) for c in C0]
+    sel = select_and_refine(cands, ref, Segments((0, 20), 40, ("a", "b")), C0, fps_ratio=4.0)
+    cam = Camera(scale=100.0, cx=160.0, cy=200.0)
+    return build_result(
+        reference_name="arm", reference_frames=42, reference_fps=120.0,
+        video={"frames": 11, "fps": 30.0, "width": 320, "height": 240}, camera=cam,
+        selection=sel, candidates=cands, timing_s={"selection": 0.01},
+        domain=parse_domain({"segment_names": ["lift", "hold"], "default_tolerance_deg": 2}),
+        reference_frame_offset=1,
+    )  # fmt: skip
+
+
+def test_built_result_is_valid_and_round_trips(result_doc, tmp_path):
+    validate_result(result_doc)
+    assert result_doc["frames"][0]["reference_frame"] == 1  # offset for the T-pose frame
+    assert result_doc["frames"][-1]["reference_frame"] == 41
+    assert [s["name"] for s in result_doc["segments"]] == ["lift", "hold"]
+    assert result_doc["frames"][3]["joints_2d"][0] == [160.0, 100.0]  # hip at y = 1 m
+    assert result_doc["timing_s"]["total"] == pytest.approx(0.01)
+    assert result_doc["summary"]["status"] == "ok"
+    path = write_result(result_doc, tmp_path / "out" / "result.json")
+    assert read_result(path) == json.loads(json.dumps(result_doc))
+    assert not list(path.parent.glob("*.tmp"))
+
+
+@pytest.mark.parametrize(
+    ("mutate", "match"),
+    [
+        (lambda d: d.pop("frames"), "'frames' is a required property"),
+        (lambda d: d["frames"][2]["joints_3d"].pop(), r"frames/2/joints_3d"),
+        (lambda d: d["frames"][0].update(selected=5), r"frames/0/selected: 5 is not an index"),
+        (lambda d: d["frames"][1].update(posture_error_deg=-1.0), r"frames/1/posture_error_deg"),
+        (lambda d: d["segments"][0].update(bone_mean_errors_deg=[1.0] * 15), r"segments/0/bone"),
+        (lambda d: d["segments"][1].update(performer_end=0), r"segments/1: a segment ends"),
+        (lambda d: d.update(version=2), "version"),
+        (lambda d: d["joints"].reverse(), "joints"),
+        (lambda d: d["timing_s"].update(stage=-3), "timing_s/stage"),
+    ],
+)
+def test_invalid_results_fail(result_doc, mutate, match):
+    bad = copy.deepcopy(result_doc)
+    mutate(bad)
+    with pytest.raises(InvalidInput, match=match):
+        validate_result(bad)
+
+
+def test_read_result_errors(tmp_path):
+    with pytest.raises(InvalidInput, match="does not exist"):
+        read_result(tmp_path / "nope.json")
+    (tmp_path / "bad.json").write_text("[")
+    with pytest.raises(InvalidInput, match="not valid JSON"):
+        read_result(tmp_path / "bad.json")
+
+
+def test_candidate_count_must_match(result_doc, rng):
+    ref = _reference()
+    C0 = np.arange(0, 41, 4)
+    cands = [ref[c][None] for c in C0]
+    sel = select_and_refine(cands, ref, Segments((0,), 40), C0)
+    with pytest.raises(InvalidInput, match="candidates"):
+        build_result(
+            reference_name="x", reference_frames=41, reference_fps=120.0,
+            video={"frames": 11, "fps": 30.0, "width": 320, "height": 240},
+            camera=Camera(scale=1.0), selection=sel, candidates=cands[:-1], timing_s={},
+        )  # fmt: skip

@@ -1,0 +1,246 @@
+"""Build the viser scene of one analysis (thesis 6.10: colour-coded errors, animation).
+
+The reference posture B_C(t') (blue-grey) and the performer's selected posture B'_t' (each bone
+green -> red by its error) are drawn as line segments with their hips overlaid; the other
+candidates are thin translucent-grey lines behind a checkbox. A frame slider, a play button and
+one button per segment (jumping to its worst frame) drive the scene. The same scene can be
+written as a ``.viser`` recording (viser's scene serializer) for static playback.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import viser
+
+from engine.body.skeleton import BONE_CHILD, BONE_PARENT
+from engine.report import ERROR_RED_DEG, error_colors
+
+REFERENCE_RGB = (110, 130, 200)
+CANDIDATE_RGB = (190, 190, 190)
+
+
+def _segments_of(joints: np.ndarray) -> np.ndarray:
+    """Bone line segments of postures: (..., 17, 3) -> (..., 16, 2, 3)."""
+    return np.stack([joints[..., BONE_PARENT, :], joints[..., BONE_CHILD, :]], -2)
+
+
+def _rgb_pairs(rgb01: np.ndarray) -> np.ndarray:
+    """Per-bone colours (16, 3) in [0, 1] -> (16, 2, 3) uint8 for line segments."""
+    c = np.clip(np.asarray(rgb01) * 255, 0, 255).astype(np.uint8)
+    return np.repeat(c[:, None], 2, 1)
+
+
+@dataclass
+class ViewerScene:
+    """Handles of a built scene; ``set_frame`` shows one video frame.
+
+    Attributes
+    ----------
+    frames : list of dict
+        ``result["frames"]``.
+    reference_joints : ndarray, shape (T, 17, 3)
+        The BVH as given (frame numbers of the result index it directly).
+    """
+
+    server: viser.ViserServer
+    reference_joints: np.ndarray
+    frames: list[dict[str, Any]]
+    fps: float
+    segments: list[dict[str, Any]] = field(default_factory=list)
+    handles: dict[str, Any] = field(default_factory=dict)
+    current: int = 0
+    _stop: threading.Event = field(default_factory=threading.Event)
+    _thread: threading.Thread | None = None
+
+    def postures(self, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(reference (17, 3), selected (17, 3), other candidates (K-1, 17, 3)) of frame i,
+        the reference translated so its hip sits on the performer's."""
+        f = self.frames[i]
+        sel = np.asarray(f["joints_3d"], float)
+        ref = self.reference_joints[int(f["reference_frame"])]
+        ref = ref - ref[0] + sel[0]
+        cands = np.asarray(f.get("candidates") or [f["joints_3d"]], float)
+        others = (
+            np.delete(cands, int(f.get("selected", 0)), axis=0) if len(cands) > 1 else cands[:0]
+        )
+        return ref, sel, others
+
+    def set_frame(self, i: int) -> None:
+        """Show video frame index ``i`` (into ``frames``)."""
+        i = int(np.clip(i, 0, len(self.frames) - 1))
+        self.current = i
+        ref, sel, others = self.postures(i)
+        f = self.frames[i]
+        h = self.handles
+        with self.server.atomic():
+            h["reference"].points = _segments_of(ref).astype(np.float32)
+            h["performer"].points = _segments_of(sel).astype(np.float32)
+            h["performer"].colors = _rgb_pairs(error_colors(np.asarray(f["bone_errors_deg"])))
+            if len(others):
+                h["candidates"].points = _segments_of(others).reshape(-1, 2, 3).astype(np.float32)
+            else:  # nothing to show: a degenerate segment at the hip
+                h["candidates"].points = np.repeat(sel[:1], 2, 0)[None].astype(np.float32)
+            h[
+                "label"
+            ].text = f"t'={f['t']}  t={f['reference_frame']}  eps={f['posture_error_deg']:.1f} deg"
+        if "slider" in h and h["slider"].value != i:
+            h["slider"].value = i
+
+    def close(self) -> None:
+        """Stop the play thread."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2)
+
+
+def _legend_html() -> str:
+    stops = ", ".join(
+        f"rgb{tuple(int(c * 255) for c in error_colors(d))} {100 * d / ERROR_RED_DEG:.0f}%"
+        for d in np.linspace(0, ERROR_RED_DEG, 5)
+    )
+    return (
+        "<div style='font-size:12px'>bone error"
+        f"<div style='height:12px;background:linear-gradient(to right,{stops})'></div>"
+        f"<div style='display:flex;justify-content:space-between'><span>0&deg;</span>"
+        f"<span>{ERROR_RED_DEG / 2:.0f}&deg;</span><span>&ge;{ERROR_RED_DEG:.0f}&deg;</span></div>"
+        "<div><span style='color:rgb(110,130,200)'>&#9632;</span> reference "
+        "<span style='color:#aaa'>&#9632;</span> other candidates</div></div>"
+    )
+
+
+def build_scene(
+    server: viser.ViserServer,
+    reference_joints: np.ndarray,
+    result: dict[str, Any],
+    *,
+    gui: bool = True,
+) -> ViewerScene:
+    """Add an analysis to a viser server.
+
+    Parameters
+    ----------
+    server : viser.ViserServer
+    reference_joints : ndarray, shape (T, 17, 3)
+        Reference joints, world frame, frames counted as in the BVH file.
+    result : dict
+        A result document (DESIGN.md).
+    gui : bool
+        Add the GUI (slider, play, candidates toggle, legend, segments).
+
+    Returns
+    -------
+    ViewerScene
+        Showing the first frame.
+    """
+    ref = np.asarray(reference_joints, float)
+    frames = list(result["frames"])
+    if not frames:
+        raise ValueError("result: no frames to show")
+    fps = float(result.get("video", {}).get("fps", 30.0))
+    scene = ViewerScene(server, ref, frames, fps, list(result.get("segments", [])))
+    server.scene.set_up_direction("+y")
+    server.scene.add_grid("/ground", width=4, height=4, plane="xz", position=(0.0, 0.0, 0.0))
+    zero = np.zeros((16, 2, 3), np.float32)
+    h = scene.handles
+    h["candidates"] = server.scene.add_line_segments(
+        "/candidates", zero, CANDIDATE_RGB, thickness=3, thickness_units="screen"
+    )
+    h["reference"] = server.scene.add_line_segments(
+        "/reference", zero, REFERENCE_RGB, thickness=6, thickness_units="screen"
+    )
+    h["performer"] = server.scene.add_line_segments(
+        "/performer", zero, np.zeros((16, 2, 3), np.uint8), thickness=8, thickness_units="screen"
+    )
+    h["label"] = server.scene.add_label("/label", "", position=(0.0, 2.1, 0.0))
+    if gui:
+        _add_gui(scene)
+    scene.set_frame(0)
+    return scene
+
+
+def _add_gui(scene: ViewerScene) -> None:
+    server, h, n = scene.server, scene.handles, len(scene.frames)
+    slider = server.gui.add_slider("frame", min=0, max=max(n - 1, 1), step=1, initial_value=0)
+    play = server.gui.add_checkbox("play", initial_value=False)
+    show = server.gui.add_checkbox("other candidates", initial_value=True)
+    server.gui.add_html(_legend_html())
+    h.update(slider=slider, play=play, show_candidates=show)
+
+    @slider.on_update
+    def _(_event: Any) -> None:
+        if int(slider.value) != scene.current:
+            scene.set_frame(int(slider.value))
+
+    @show.on_update
+    def _(_event: Any) -> None:
+        h["candidates"].visible = bool(show.value)
+
+    t_to_i = {int(f["t"]): i for i, f in enumerate(scene.frames)}
+    with server.gui.add_folder("segments"):
+        for j, s in enumerate(scene.segments):
+            worst = t_to_i.get(int(s.get("worst_frame", s["performer_start"])), 0)
+            label = f"{s.get('name') or j + 1}: {s['mean_error_deg']:.1f} deg"
+            if s.get("status", "ok") != "ok":
+                label += f" ({s['status']})"
+            button = server.gui.add_button(label)
+            button.on_click(lambda _e, i=worst: scene.set_frame(i))
+            h[f"segment_{j}"] = button
+
+    def loop() -> None:
+        while not scene._stop.wait(1.0 / max(scene.fps, 1.0)):
+            if play.value:
+                scene.set_frame((scene.current + 1) % n)
+
+    scene._thread = threading.Thread(target=loop, name="viewer-play", daemon=True)
+    scene._thread.start()
+
+
+def record_scene(scene: ViewerScene, *, stride: int = 1) -> bytes:
+    """A ``.viser`` recording of the whole analysis: one keyframe per video frame.
+
+    Parameters
+    ----------
+    scene : ViewerScene
+        Built with :func:`build_scene`.
+    stride : int
+        Record every ``stride``-th frame.
+
+    Returns
+    -------
+    bytes
+        Write to ``name.viser``; play with viser's static client.
+    """
+    serializer = scene.server.get_scene_serializer()
+    for i in range(0, len(scene.frames), max(1, stride)):
+        scene.set_frame(i)
+        serializer.insert_sleep(stride / max(scene.fps, 1.0))
+    data = serializer.serialize()
+    scene.set_frame(0)
+    return data
+
+
+def free_port() -> int:
+    """An unused TCP port on localhost."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def wait_until_listening(port: int, timeout_s: float = 10.0) -> None:
+    """Block until something accepts connections on ``port``."""
+    import socket
+
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        with socket.socket() as s:
+            if s.connect_ex(("127.0.0.1", port)) == 0:
+                return
+        time.sleep(0.05)
+    raise TimeoutError(f"nothing listens on port {port} after {timeout_s} s")
