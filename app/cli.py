@@ -23,6 +23,12 @@ def build_parser() -> argparse.ArgumentParser:
         service_commands = None
     if service_commands is not None:
         service_commands.register(sub)
+    try:
+        from web import commands as web_commands
+    except ImportError:  # the viewer extra is not installed
+        web_commands = None
+    if web_commands is not None:
+        web_commands.register(sub)
     return parser
 
 

@@ -13,6 +13,7 @@ Progress goes out through ``on_progress(stage, fraction)``; nothing here knows w
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 from collections.abc import Callable, Sequence
@@ -164,8 +165,8 @@ class CandidateChunk:
         counts = np.array([len(c) for c in self.candidates])
         arrays = {
             "frames": self.frames, "counts": counts,
-            "candidates": np.concatenate(self.candidates) if self.candidates else np.zeros((0, 17, 3)),
-            "d_s": np.concatenate(self.d_s) if self.d_s else np.zeros(0),
+            "candidates": np.concatenate(self.candidates or [np.zeros((0, 17, 3))]),
+            "d_s": np.concatenate(self.d_s or [np.zeros(0)]),
         }  # fmt: skip
         save_arrays(path, arrays, {"flags": [list(f) for f in self.flags], "seconds": self.seconds})
 
@@ -202,9 +203,13 @@ def prepare(
     video_path: PathLike,
     settings: Settings | dict | None = None,
     *,
+    frames: tuple[int, int] | None = None,
     on_progress: ProgressFn | None = None,
 ) -> Prepared:
     """Stages 0-2 (thesis 4.1, 4.2, 4.5) from files.
+
+    ``frames = (a, b)`` analyses video frames a..b-1 only; result frame numbers still count
+    the file's frames.
 
     Raises
     ------
@@ -221,6 +226,15 @@ def prepare(
     t0 = time.perf_counter()
     reference = load_reference(reference_path)
     video = read_video(video_path, height=s.working_height, limits=s.video)
+    offset = 0
+    if frames is not None:
+        a, b = frames
+        if not 0 <= a < b <= video.n_frames or b - a < 2:
+            raise InvalidInput(f"frames must be a range of >= 2 frames within 0..{video.n_frames}")
+        video = dataclasses.replace(
+            video, frames=video.frames[a:b], timestamps_s=video.timestamps_s[a:b]
+        )
+        offset = a
     segments = _reference_segments(reference, reference_path)
     load_s = time.perf_counter() - t0
     fg, camera, aligned, timing = run_stages_0_2(
@@ -235,7 +249,7 @@ def prepare(
         reference_joints=reference.motion.joints, shape=reference.shape,
         video={"frames": int(video.n_frames), "fps": float(video.fps), "width": int(w),
                "height": int(h), "original_width": int(video.original_width),
-               "original_height": int(video.original_height)},
+               "original_height": int(video.original_height), "offset": offset},
         camera=camera, silhouettes=fg.silhouettes, edges=fg.edges,
         C=np.asarray(aligned.C, dtype=int), rotations=np.asarray(aligned.rotations, float),
         segments=segments, flags=tuple(tuple(f) for f in fg.flags),
@@ -270,7 +284,9 @@ def candidates(
     )  # fmt: skip
     return CandidateChunk(
         frames=idx, candidates=[f.candidates for f in out], d_s=[f.d_s for f in out],
-        flags=tuple(tuple(prepared.flags[t]) + tuple(f.flags) for t, f in zip(idx, out)),
+        flags=tuple(
+            tuple(prepared.flags[t]) + tuple(f.flags) for t, f in zip(idx, out, strict=True)
+        ),
         seconds=time.perf_counter() - t0,
     )  # fmt: skip
 
@@ -288,6 +304,14 @@ def select(
     from engine.stages.selection import select_and_refine
 
     s = _settings(settings)
+    domain = find_domain(prepared.reference_path)
+    sel_settings = s.selection
+    if domain is not None and domain.boundary_joints:
+        sel_settings = dataclasses.replace(sel_settings, boundary_joints=domain.boundary_joints)
+    if domain is not None and domain.direction_change_deg is not None:
+        sel_settings = dataclasses.replace(
+            sel_settings, direction_change_deg=domain.direction_change_deg
+        )
     order = sorted(chunks, key=lambda c: int(c.frames[0]))
     frames = np.concatenate([c.frames for c in order])
     if not np.array_equal(frames, np.arange(prepared.n_frames)):
@@ -297,7 +321,7 @@ def select(
     t0 = time.perf_counter()
     selection = select_and_refine(
         cands, prepared.reference_joints, prepared.segments, prepared.C.astype(float),
-        settings=s.selection, fps_ratio=prepared.reference_fps / prepared.video["fps"],
+        settings=sel_settings, fps_ratio=prepared.reference_fps / prepared.video["fps"],
         candidate_flags=flags, on_progress=on_progress,
     )  # fmt: skip
     timing = dict(prepared.timing_s)
@@ -312,8 +336,8 @@ def select(
         video={"frames": v["frames"], "fps": v["fps"], "width": v["original_width"],
                "height": v["original_height"]},
         camera=original_pixels(prepared.camera, v["original_width"], v["original_height"]),
-        selection=selection, candidates=cands, timing_s=timing,
-        domain=find_domain(prepared.reference_path),
+        selection=selection, candidates=cands, timing_s=timing, domain=domain,
+        video_frame_offset=int(v.get("offset", 0)),
     )  # fmt: skip
 
 
@@ -336,11 +360,12 @@ def analyze(
     video_path: PathLike,
     settings: Settings | dict | None = None,
     *,
+    frames: tuple[int, int] | None = None,
     on_progress: ProgressFn | None = None,
 ) -> dict:
     """The whole registration (thesis chapter 4) in this process -> the result document."""
     s = _settings(settings)
-    prepared = prepare(reference_path, video_path, s, on_progress=on_progress)
+    prepared = prepare(reference_path, video_path, s, frames=frames, on_progress=on_progress)
     chunks = [
         candidates(prepared, r, s, on_progress=on_progress)
         for r in prepared.chunks(max(1, -(-prepared.n_frames // s.chunk_frames)))

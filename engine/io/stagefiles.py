@@ -20,7 +20,9 @@ from engine.errors import InvalidInput
 _META = "__meta__"
 
 
-def save_arrays(path: str | os.PathLike, arrays: dict[str, np.ndarray], meta: dict[str, Any]) -> Path:
+def save_arrays(
+    path: str | os.PathLike, arrays: dict[str, np.ndarray], meta: dict[str, Any]
+) -> Path:
     """Write named arrays and a JSON-able header to ``path`` atomically."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
