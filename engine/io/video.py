@@ -1,0 +1,345 @@
+"""Video input: the only module that decodes video files (PyAV, i.e. FFmpeg).
+
+Two entry points:
+
+* :func:`probe_video` -- cheap acceptance check for the upload service: opens the file,
+  reads the container's size, rate and duration, decodes the first frames, and refuses the
+  file with :class:`~engine.errors.InvalidInput` when it cannot be used.
+* :func:`read_video` -- decodes every frame, applies the rotation stored in the file's
+  display matrix (phone videos), keeps the real presentation timestamps and scales the
+  frames to the working resolution (thesis 5.1 uses 320 x 240 images; default 240 rows).
+
+Frames are returned as RGB ``uint8`` arrays ``(T', H, W, 3)``, rows first.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from engine.errors import InvalidInput
+
+#: Container formats the product accepts, by file suffix.
+VIDEO_SUFFIXES: tuple[str, ...] = (".mp4", ".mov", ".m4v", ".webm", ".avi", ".mkv")
+
+
+@dataclass(frozen=True)
+class VideoLimits:
+    """What a video may be before it is refused (checked before any work starts).
+
+    Attributes
+    ----------
+    max_duration_s : float
+        Longest accepted video, seconds (a sports motion lasts seconds, not minutes).
+    max_bytes : int
+        Largest accepted file, bytes.
+    max_pixels : int
+        Largest accepted frame, width x height of the stored frames (4K by default).
+    min_frames : int
+        Fewest frames: alignment needs at least two.
+    probe_frames : int
+        Frames :func:`probe_video` decodes to prove the file is readable.
+    """
+
+    max_duration_s: float = 60.0
+    max_bytes: int = 500 * 1024 * 1024
+    max_pixels: int = 3840 * 2160
+    min_frames: int = 2
+    probe_frames: int = 2
+
+
+@dataclass(frozen=True)
+class VideoInfo:
+    """What :func:`probe_video` learns about a file without decoding all of it.
+
+    Attributes
+    ----------
+    width, height : int
+        Frame size as displayed (after the stored rotation), pixels.
+    fps : float
+        Average frame rate.
+    frames : int
+        Frame count (from the container, or estimated from duration x fps).
+    duration_s : float
+    rotation_deg : int
+        Counter-clockwise rotation applied to the stored frames for display.
+    codec : str
+    size_bytes : int
+    """
+
+    width: int
+    height: int
+    fps: float
+    frames: int
+    duration_s: float
+    rotation_deg: int
+    codec: str
+    size_bytes: int
+
+
+@dataclass(frozen=True)
+class Video:
+    """A decoded video at working resolution.
+
+    Attributes
+    ----------
+    frames : ndarray of uint8, shape (T', H, W, 3)
+        RGB frames, rows first.
+    fps : float
+        Average frame rate (``(T' - 1) / (timestamps_s[-1] - timestamps_s[0])`` when the
+        container's rate is missing).
+    timestamps_s : ndarray, shape (T',)
+        Presentation time of each frame, seconds from the first frame.
+    original_width, original_height : int
+        Displayed size of the file's frames before scaling.
+    scale : float
+        Working pixels per original pixel (``H / original_height``).
+    name : str
+        File stem.
+    """
+
+    frames: np.ndarray
+    fps: float
+    timestamps_s: np.ndarray
+    original_width: int
+    original_height: int
+    scale: float
+    name: str = ""
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.frames.shape[0])
+
+    @property
+    def height(self) -> int:
+        return int(self.frames.shape[1])
+
+    @property
+    def width(self) -> int:
+        return int(self.frames.shape[2])
+
+    def to_dict(self) -> dict:
+        """The DESIGN.md ``video`` block."""
+        return {
+            "name": self.name,
+            "frames": self.n_frames,
+            "fps": float(self.fps),
+            "width": self.width,
+            "height": self.height,
+            "original_width": int(self.original_width),
+            "original_height": int(self.original_height),
+        }
+
+
+def _open(path: Path):
+    import av
+
+    try:
+        return av.open(str(path))
+    except (av.error.FFmpegError, OSError, UnicodeDecodeError) as exc:
+        raise InvalidInput(f"{path.name} is not a readable video file ({exc})") from exc
+
+
+def _check_file(path: str | os.PathLike, limits: VideoLimits) -> Path:
+    p = Path(path)
+    if not p.is_file():
+        raise InvalidInput(f"video file {str(p)!r} does not exist")
+    size = p.stat().st_size
+    if size == 0:
+        raise InvalidInput(f"{p.name} is empty (0 bytes)")
+    if size > limits.max_bytes:
+        raise InvalidInput(
+            f"{p.name} is {size / 2**20:.0f} MB; the limit is {limits.max_bytes / 2**20:.0f} MB"
+        )
+    return p
+
+
+def _rotate(rgb: np.ndarray, rotation_deg: int) -> np.ndarray:
+    """Apply a display-matrix rotation (counter-clockwise degrees, multiples of 90)."""
+    k = int(round(rotation_deg / 90.0)) % 4
+    return np.ascontiguousarray(np.rot90(rgb, k)) if k else rgb
+
+
+def probe_video(path: str | os.PathLike, limits: VideoLimits = VideoLimits()) -> VideoInfo:
+    """Check that a file is a usable video, cheaply (decodes ``limits.probe_frames`` frames).
+
+    Parameters
+    ----------
+    path : path-like
+    limits : VideoLimits
+
+    Returns
+    -------
+    VideoInfo
+
+    Raises
+    ------
+    InvalidInput
+        Missing, empty, unreadable or truncated file; no video stream; fewer than
+        ``limits.min_frames`` frames; over the duration, size or resolution limit.
+    """
+    p = _check_file(path, limits)
+    container = _open(p)
+    try:
+        if not container.streams.video:
+            raise InvalidInput(f"{p.name} has no video stream")
+        stream = container.streams.video[0]
+        width, height = int(stream.codec_context.width), int(stream.codec_context.height)
+        if width * height > limits.max_pixels:
+            raise InvalidInput(
+                f"{p.name} is {width}x{height} pixels; the limit is {limits.max_pixels} pixels "
+                "per frame"
+            )
+        rate = float(stream.average_rate) if stream.average_rate else 0.0
+        duration = 0.0
+        if stream.duration is not None and stream.time_base is not None:
+            duration = float(stream.duration * stream.time_base)
+        elif container.duration is not None:
+            duration = container.duration / 1e6
+        if duration > limits.max_duration_s:
+            raise InvalidInput(
+                f"{p.name} lasts {duration:.1f} s; the limit is {limits.max_duration_s:.0f} s"
+            )
+        decoded = []
+        try:
+            for frame in container.decode(stream):
+                decoded.append(frame)
+                if len(decoded) >= max(limits.probe_frames, limits.min_frames):
+                    break
+        except Exception as exc:  # FFmpeg raises many error types for corrupt data
+            if not decoded:
+                raise InvalidInput(f"{p.name} could not be decoded ({exc})") from exc
+        if not decoded:
+            raise InvalidInput(f"{p.name} contains no decodable video frame")
+        n = int(stream.frames) if stream.frames else int(round(duration * rate))
+        if len(decoded) < limits.min_frames or n < limits.min_frames:
+            raise InvalidInput(
+                f"{p.name} has {max(len(decoded), 0) if len(decoded) < 2 else n} frame(s); "
+                f"at least {limits.min_frames} are needed"
+            )
+        rotation = int(getattr(decoded[0], "rotation", 0) or 0)
+        if int(round(rotation / 90.0)) % 2:
+            width, height = height, width
+        return VideoInfo(
+            width=width,
+            height=height,
+            fps=rate,
+            frames=n,
+            duration_s=duration,
+            rotation_deg=rotation,
+            codec=str(stream.codec_context.name),
+            size_bytes=p.stat().st_size,
+        )
+    finally:
+        container.close()
+
+
+def read_video(
+    path: str | os.PathLike,
+    *,
+    height: int = 240,
+    limits: VideoLimits = VideoLimits(),
+    max_frames: int | None = None,
+) -> Video:
+    """Decode a video at working resolution.
+
+    Parameters
+    ----------
+    path : path-like
+    height : int
+        Working image height in pixels; the width keeps the aspect ratio (rounded to even).
+        ``0`` keeps the original size.
+    limits : VideoLimits
+        Checked by :func:`probe_video` before decoding starts.
+    max_frames : int, optional
+        Stop after this many frames.
+
+    Returns
+    -------
+    Video
+
+    Raises
+    ------
+    InvalidInput
+        As :func:`probe_video`, or ``height`` out of range, or the file turns out to hold
+        fewer than ``limits.min_frames`` decodable frames.
+    """
+    if not isinstance(height, int | np.integer) or not (height == 0 or 32 <= height <= 4320):
+        raise InvalidInput(f"height must be 0 (keep) or 32..4320 pixels, got {height!r}")
+    info = probe_video(path, limits)
+    p = Path(path)
+    scale = 1.0 if height == 0 else height / info.height
+    out_w = info.width if height == 0 else max(2, int(round(info.width * scale / 2.0)) * 2)
+    out_h = info.height if height == 0 else int(height)
+    frames: list[np.ndarray] = []
+    times: list[float] = []
+    container = _open(p)
+    try:
+        stream = container.streams.video[0]
+        stream.thread_type = "AUTO"
+        try:
+            for frame in container.decode(stream):
+                rgb = _rotate(frame.to_ndarray(format="rgb24"), int(frame.rotation or 0))
+                if rgb.shape[:2] != (out_h, out_w):
+                    interp = cv2.INTER_AREA if scale < 1 else cv2.INTER_LINEAR
+                    rgb = cv2.resize(rgb, (out_w, out_h), interpolation=interp)
+                frames.append(rgb)
+                times.append(float(frame.time) if frame.time is not None else np.nan)
+                if max_frames is not None and len(frames) >= max_frames:
+                    break
+        except Exception:  # a truncated tail: keep what decoded, judged below
+            pass
+    finally:
+        container.close()
+    if len(frames) < limits.min_frames:
+        raise InvalidInput(
+            f"{p.name} has {len(frames)} decodable frame(s); at least {limits.min_frames} are "
+            "needed"
+        )
+    t = np.asarray(times, dtype=float)
+    if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
+        rate = info.fps if info.fps > 0 else 30.0
+        t = np.arange(len(frames)) / rate
+    t = t - t[0]
+    fps = info.fps if info.fps > 0 else (len(t) - 1) / t[-1]
+    if t[-1] > limits.max_duration_s:
+        raise InvalidInput(
+            f"{p.name} lasts {t[-1]:.1f} s; the limit is {limits.max_duration_s:.0f} s"
+        )
+    return Video(
+        frames=np.stack(frames),
+        fps=float(fps),
+        timestamps_s=t,
+        original_width=info.width,
+        original_height=info.height,
+        scale=float(scale),
+        name=p.stem,
+    )
+
+
+def video_from_frames(frames: np.ndarray, fps: float, name: str = "") -> Video:
+    """Wrap in-memory RGB frames (tests, synthetic cases) as a :class:`Video`.
+
+    Parameters
+    ----------
+    frames : ndarray of uint8, shape (T', H, W, 3)
+    fps : float
+
+    Raises
+    ------
+    InvalidInput
+        Wrong shape or dtype, fewer than two frames, or a non-positive ``fps``.
+    """
+    f = np.asarray(frames)
+    if f.ndim != 4 or f.shape[-1] != 3 or f.dtype != np.uint8:
+        raise InvalidInput(f"frames must be uint8 of shape (T', H, W, 3), got {f.dtype} {f.shape}")
+    if f.shape[0] < 2:
+        raise InvalidInput(f"frames must hold at least 2 frames, got {f.shape[0]}")
+    if not fps > 0:
+        raise InvalidInput(f"fps must be positive, got {fps!r}")
+    h, w = f.shape[1:3]
+    return Video(f, float(fps), np.arange(f.shape[0]) / fps, w, h, 1.0, name)

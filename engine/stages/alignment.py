@@ -1,0 +1,445 @@
+"""Stage 2: approximate temporal correspondence C and global rotations T_t' (thesis 4.5).
+
+d(t', t) = min over sampled global rotations T of d_S(P(T(B_t)), S'_t') (eq. 4.8-4.9), then the
+least-cost one-to-one monotone path through the correspondence matrix by the DP of eq. 4.11:
+
+    D(t', t) = d(t', t) + min_{i = 1..w} D(t' - 1, t - i),       w = ceil(k L / L')
+
+restricted to a band of half-width beta around the straight diagonal, with C(0) = C_0 (the
+reference frame the first video frame shows) and C(L') = L. Thesis 6.3 suggests letting the
+ends float: ``float_start`` / ``float_end`` let C(0) lie in [C_0, C_0 + f_s] and C(L') in
+[L - f_e, L].
+
+Speed (beyond the thesis): images are compared at half resolution (160 x 120), d is
+evaluated only inside the band, and coarse-to-fine over reference frames: first every
+``coarse_stride``-th reference frame, a DP on that coarse matrix, then every frame within
+``refine_radius`` of the coarse path, and the final DP on that.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from engine.body.kinematics import rotation_about_axis
+from engine.body.shapes import BodyShape
+from engine.errors import InvalidInput
+from engine.measures import LAMBDA_A, LAMBDA_E
+from engine.render import capsules
+from engine.render.camera import Camera
+from engine.stages.foreground import contour
+
+ProgressFn = Callable[[str, float], None]
+
+
+@dataclass(frozen=True)
+class AlignmentSettings:
+    """Settings of stage 2 (thesis 4.5, experiments 5.1).
+
+    Attributes
+    ----------
+    k : float
+        Window factor: the path advances at most w = ceil(k L / L') reference frames per
+        video frame. Thesis 5.1.3: optimal from k = 7-10.
+    band_fraction : float
+        beta / L, half-width of the band around the diagonal. Thesis 5.1.4: optimal from
+        16-20 %; 0.25 leaves room for uneven pacing.
+    yaw_deg : tuple of float
+        Sampled rotations about the vertical (wide).
+    tilt_deg : tuple of float
+        Sampled small pitch and roll angles (each used alone, with yaw 0). With the default
+        yaws this gives the thesis' 10 samples.
+    lambda_A, lambda_E : float
+        Weights of d_S (eq. 4.4).
+    compare_height : int
+        Image height used for the comparisons (thesis: 240; half of it is enough here).
+    coarse_stride : int
+        Reference-frame stride of the coarse pass (1 disables coarse-to-fine).
+    refine_radius : int
+        Reference frames either side of the coarse path evaluated in the fine pass.
+    float_start, float_end : int
+        How far C(0) may move after the calibration frame and C(L') before L (thesis 6.3).
+    one_to_one : bool
+        Thesis: C strictly increasing. When the refined corridor admits no such path (a
+        performer slower than the reference's frame rate for a while), the DP falls back
+        to allowing repeated reference frames and says so in ``relaxed``.
+    """
+
+    k: float = 10.0
+    band_fraction: float = 0.25
+    yaw_deg: tuple[float, ...] = (-45.0, -30.0, -15.0, 0.0, 15.0, 30.0, 45.0)
+    tilt_deg: tuple[float, ...] = (-10.0, 10.0)
+    lambda_A: float = LAMBDA_A
+    lambda_E: float = LAMBDA_E
+    compare_height: int = 120
+    coarse_stride: int = 4
+    refine_radius: int = 6
+    float_start: int = 0
+    float_end: int = 0
+    one_to_one: bool = True
+
+
+@dataclass(frozen=True)
+class AlignmentResult:
+    """Approximate temporal correspondence (thesis 4.5).
+
+    Attributes
+    ----------
+    C : ndarray of int, shape (T',)
+        Reference frame of each video frame.
+    rotations : ndarray, shape (T', 3, 3)
+        Global rotation T_t' (about the hip joint, world frame) of the best sample.
+    cost : ndarray, shape (T', T)
+        d(t', t); ``inf`` where it was not evaluated.
+    sample : ndarray of int, shape (T', T)
+        Index of the best rotation sample per entry (-1 where not evaluated).
+    samples : ndarray, shape (S, 3, 3)
+        The rotation samples.
+    E_C : float
+        Mean cost along the path (eq. 4.10).
+    timing_s : dict
+    relaxed : bool
+        True when the one-to-one constraint had to be dropped.
+    """
+
+    C: np.ndarray
+    rotations: np.ndarray
+    cost: np.ndarray
+    sample: np.ndarray
+    samples: np.ndarray
+    E_C: float
+    timing_s: dict
+    relaxed: bool = False
+
+
+# ----------------------------------------------------------------------------- the DP
+
+
+def window_size(k: float, n_ref: int, n_video: int) -> int:
+    """w = ceil(k L / L') (thesis 4.5.2), at least 1; L, L' are frame counts minus one."""
+    L, Lv = max(n_ref - 1, 1), max(n_video - 1, 1)
+    return max(1, int(np.ceil(k * L / Lv - 1e-9)))
+
+
+def band_mask(
+    n_video: int, n_ref: int, beta: float, *, start: int = 0, end: int | None = None
+) -> np.ndarray:
+    """Entries within ``beta`` reference frames of the straight diagonal (thesis fig. 4.4).
+
+    Returns
+    -------
+    ndarray of bool, shape (T', T)
+    """
+    end = n_ref - 1 if end is None else end
+    tv = np.arange(n_video)[:, None]
+    diag = start + (end - start) * tv / max(n_video - 1, 1)
+    return np.abs(np.arange(n_ref)[None, :] - diag) <= beta
+
+
+def dp_path(
+    cost: np.ndarray,
+    *,
+    window: int,
+    start: int = 0,
+    end: int | None = None,
+    float_start: int = 0,
+    float_end: int = 0,
+    min_step: int = 1,
+) -> tuple[np.ndarray, float]:
+    """Least-cost one-to-one monotone path (thesis 4.5.2, eq. 4.11).
+
+    Parameters
+    ----------
+    cost : ndarray, shape (T', T)
+        d(t', t); ``inf`` marks forbidden entries (outside the band).
+    window : int
+        w: C(t') - C(t' - 1) in 1..w.
+    start : int
+        C(0) (or the earliest C(0) with ``float_start``).
+    end : int, optional
+        C(L'); the last reference frame by default (or the latest C(L') with ``float_end``).
+    float_start, float_end : int
+        C(0) in [start, start + float_start], C(L') in [end - float_end, end] (thesis 6.3).
+    min_step : int
+        1 (thesis: one-to-one) or 0 (a reference frame may repeat; used on coarse grids).
+
+    Returns
+    -------
+    C : ndarray of int, shape (T',)
+    total : float
+        Sum of the costs along the path.
+
+    Raises
+    ------
+    InvalidInput
+        Bad shapes or parameters, or no path satisfies the constraints (e.g. more video
+        frames than reference frames between the pinned ends).
+    """
+    d = np.asarray(cost, dtype=float)
+    if d.ndim != 2 or d.shape[0] < 1 or d.shape[1] < 1:
+        raise InvalidInput(f"cost must be a (T', T) matrix, got shape {d.shape}")
+    n_v, n_r = d.shape
+    end = n_r - 1 if end is None else int(end)
+    if not isinstance(window, int | np.integer) or window < 1:
+        raise InvalidInput(f"window must be an integer >= 1, got {window!r}")
+    if not (0 <= start <= end < n_r):
+        raise InvalidInput(f"start and end must satisfy 0 <= start <= end < {n_r}, got {start}, {end}")
+    if min_step not in (0, 1):
+        raise InvalidInput(f"min_step must be 0 or 1, got {min_step!r}")
+    if float_start < 0 or float_end < 0:
+        raise InvalidInput(f"float_start and float_end must be >= 0, got {float_start}, {float_end}")
+    D = np.full((n_v, n_r), np.inf)
+    s_hi = min(start + float_start, n_r - 1)
+    D[0, start : s_hi + 1] = d[0, start : s_hi + 1]
+    span = window - min_step + 1
+    pad = np.full(window, np.inf)
+    for tv in range(1, n_v):
+        prev = np.concatenate([pad, D[tv - 1]])
+        # m[t] = min(D[tv-1, t-window : t-min_step+1]), the predecessors of t
+        win = np.lib.stride_tricks.sliding_window_view(prev[: len(prev) - min_step], span)
+        D[tv] = d[tv] + win.min(axis=1)
+    e_lo = max(end - float_end, 0)
+    last = D[-1, e_lo : end + 1]
+    if not np.isfinite(last).any():
+        raise InvalidInput(
+            f"no monotone path of {n_v} video frames fits between reference frames {start} and "
+            f"{end} with window {window} inside the band"
+        )
+    C = np.empty(n_v, dtype=int)
+    C[-1] = e_lo + int(np.argmin(last))
+    for tv in range(n_v - 1, 0, -1):
+        lo = max(C[tv] - window, 0)
+        C[tv - 1] = lo + int(np.argmin(D[tv - 1, lo : C[tv] - min_step + 1]))
+    return C, float(D[-1, C[-1]])
+
+
+# ----------------------------------------------------------------------------- costs
+
+
+def rotation_samples(yaw_deg: tuple[float, ...], tilt_deg: tuple[float, ...]) -> np.ndarray:
+    """Sampled global rotations (thesis 4.5.1 step 1): yaws, then pitches and rolls alone.
+
+    Returns
+    -------
+    ndarray, shape (S, 3, 3)
+    """
+    y = np.radians(np.asarray(yaw_deg, dtype=float))
+    t = np.radians(np.asarray(tilt_deg, dtype=float))
+    axes = [np.array([0.0, 1.0, 0.0])] * len(y)
+    axes += [np.array([1.0, 0.0, 0.0])] * len(t) + [np.array([0.0, 0.0, 1.0])] * len(t)
+    angles = np.concatenate([y, t, t])
+    if not len(angles):
+        return np.eye(3)[None]
+    return rotation_about_axis(np.stack(axes), angles)
+
+
+def rotate_about_hip(joints: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """T(B): rotate postures about their hip joint.
+
+    Parameters
+    ----------
+    joints : ndarray, shape (T, 17, 3)
+    R : ndarray, shape (S, 3, 3)
+
+    Returns
+    -------
+    ndarray, shape (S, T, 17, 3)
+    """
+    hip = joints[:, :1, :]
+    return hip[None] + np.einsum("sij,tkj->stki", R, joints - hip)
+
+
+def half_camera(camera: Camera, height: int) -> Camera:
+    """The camera for images resized to ``height`` rows (pixel centres at integers)."""
+    f = height / camera.height
+    return Camera(
+        scale=camera.scale * f, theta_z=camera.theta_z,
+        cx=(camera.cx + 0.5) * f - 0.5, cy=(camera.cy + 0.5) * f - 0.5,
+        azimuth=camera.azimuth, width=int(round(camera.width * f)), height=int(height),
+    )  # fmt: skip
+
+
+def make_targets(
+    silhouettes: np.ndarray, skin: np.ndarray | None, height: int
+) -> list[capsules.Target]:
+    """Input regions at the comparison resolution, edges = silhouette and skin contours.
+
+    Parameters
+    ----------
+    silhouettes : ndarray of bool, shape (T', H, W)
+    skin : ndarray of bool, shape (T', H, W), optional
+    height : int
+    """
+    n, h, w = silhouettes.shape
+    width = int(round(w * height / h))
+    out = []
+    for i in range(n):
+        sil = cv2.resize(silhouettes[i].astype(np.float32), (width, height),
+                         interpolation=cv2.INTER_AREA) >= 0.5  # fmt: skip
+        edges = contour(sil)
+        if skin is not None and skin[i].any():
+            sk = cv2.resize(skin[i].astype(np.float32), (width, height),
+                            interpolation=cv2.INTER_AREA) >= 0.5  # fmt: skip
+            edges |= contour(sk)
+        out.append(capsules.Target.from_masks(sil, edges))
+    return out
+
+
+def cost_entries(
+    posed: np.ndarray,
+    targets: list[capsules.Target],
+    shape: BodyShape,
+    camera: Camera,
+    entries: np.ndarray,
+    settings: AlignmentSettings,
+    *,
+    on_progress: Callable[[float], None] | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """d(t', t) = min_s d_S(P(T_s(B_t)), S'_t') for a set of (t', t) (thesis eq. 4.8-4.9).
+
+    Parameters
+    ----------
+    posed : ndarray, shape (S, T, 17, 3)
+        Reference postures under each rotation sample.
+    targets : list of Target, length T'
+    entries : ndarray of bool, shape (T', T)
+        Which entries to evaluate.
+
+    Returns
+    -------
+    cost : ndarray, shape (T', T)
+        ``inf`` where not evaluated.
+    best : ndarray of int, shape (T', T)
+        Best sample index, -1 where not evaluated.
+    """
+    n_s = posed.shape[0]
+    n_v, n_r = entries.shape
+    cost = np.full((n_v, n_r), np.inf)
+    best = np.full((n_v, n_r), -1, dtype=int)
+    for tv in range(n_v):
+        ts = np.flatnonzero(entries[tv])
+        if ts.size == 0:
+            continue
+        j = posed[:, ts].reshape(-1, 17, 3)
+        d = capsules.d_S_batch(j, targets[tv], shape, camera, lambda_A=settings.lambda_A,
+                               lambda_E=settings.lambda_E).reshape(n_s, ts.size)  # fmt: skip
+        best[tv, ts] = np.argmin(d, axis=0)
+        cost[tv, ts] = d[best[tv, ts], np.arange(ts.size)]
+        if on_progress is not None:
+            on_progress((tv + 1) / n_v)
+    return cost, best
+
+
+def align(
+    reference_joints: np.ndarray,
+    shape: BodyShape,
+    camera: Camera,
+    silhouettes: np.ndarray,
+    skin: np.ndarray | None = None,
+    settings: AlignmentSettings = AlignmentSettings(),
+    *,
+    start: int = 0,
+    on_progress: ProgressFn | None = None,
+) -> AlignmentResult:
+    """Approximate temporal correspondence and global rotations (thesis 4.5).
+
+    Parameters
+    ----------
+    reference_joints : ndarray, shape (T, 17, 3)
+        Reference motion B_t, world frame.
+    shape : BodyShape
+    camera : Camera
+        Calibrated camera for the silhouettes' image size (stage 1).
+    silhouettes : ndarray of bool, shape (T', H, W)
+        Input body regions (stage 0).
+    skin : ndarray of bool, shape (T', H, W), optional
+        Skin regions (their contours join the input edges).
+    settings : AlignmentSettings
+    start : int
+        C(0): the reference frame the first video frame shows.
+    on_progress : callable(stage, fraction), optional
+        Called with ``"alignment"``.
+
+    Returns
+    -------
+    AlignmentResult
+
+    Raises
+    ------
+    InvalidInput
+        Bad shapes or settings, or no path fits (see :func:`dp_path`).
+    """
+    ref = np.asarray(reference_joints, dtype=float)
+    if ref.ndim != 3 or ref.shape[1:] != (17, 3) or ref.shape[0] < 2:
+        raise InvalidInput(f"reference_joints must be (T >= 2, 17, 3), got {ref.shape}")
+    sil = np.asarray(silhouettes, dtype=bool)
+    if sil.ndim != 3 or sil.shape[1:] != (camera.height, camera.width):
+        raise InvalidInput(
+            f"silhouettes must be (T', {camera.height}, {camera.width}) like the camera's "
+            f"image, got {sil.shape}"
+        )
+    if not 0 <= start < ref.shape[0]:
+        raise InvalidInput(f"start must be a reference frame 0..{ref.shape[0] - 1}, got {start}")
+    if settings.k <= 0 or settings.band_fraction <= 0 or settings.coarse_stride < 1:
+        raise InvalidInput("settings.k, band_fraction and coarse_stride must be positive")
+    report = on_progress or (lambda stage, f: None)
+    timing: dict[str, float] = {}
+    t0 = time.perf_counter()
+    n_v, n_r = sil.shape[0], ref.shape[0]
+    cam = half_camera(camera, settings.compare_height)
+    targets = make_targets(sil, skin, settings.compare_height)
+    R = rotation_samples(settings.yaw_deg, settings.tilt_deg)
+    posed = rotate_about_hip(ref, R)
+    timing["prepare"] = time.perf_counter() - t0
+    beta = settings.band_fraction * (n_r - 1 - start)
+    band = band_mask(n_v, n_r, beta, start=start)
+    w = window_size(settings.k, n_r - start, n_v)
+    s = settings.coarse_stride
+    t0 = time.perf_counter()
+    if s > 1:
+        cols = np.zeros(n_r, bool)
+        cols[start::s] = True
+        cols[[start, n_r - 1]] = True
+        coarse_entries = band & cols[None, :]
+        cost, best = cost_entries(
+            posed, targets, shape, cam, coarse_entries, settings,
+            on_progress=lambda f: report("alignment", 0.6 * f),
+        )  # fmt: skip
+        # DP over the coarse columns only (window in coarse steps)
+        idx = np.flatnonzero(cols)
+        cw = max(1, int(np.ceil(w / s)))
+        Cc, _ = dp_path(cost[:, idx], window=cw, start=0, end=len(idx) - 1,
+                        float_start=int(np.ceil(settings.float_start / s)),
+                        float_end=int(np.ceil(settings.float_end / s)), min_step=0)  # fmt: skip
+        near = np.abs(np.arange(n_r)[None, :] - idx[Cc][:, None]) <= settings.refine_radius + s
+        fine = band & near & ~np.isfinite(cost)
+        c2, b2 = cost_entries(posed, targets, shape, cam, fine, settings,
+                              on_progress=lambda f: report("alignment", 0.6 + 0.4 * f))  # fmt: skip
+        cost = np.where(fine, c2, cost)
+        best = np.where(fine, b2, best)
+        # the final DP must stay in the refined corridor, where every entry is known
+        dp_cost = np.where(near, cost, np.inf)
+    else:
+        cost, best = cost_entries(posed, targets, shape, cam, band, settings,
+                                  on_progress=lambda f: report("alignment", f))  # fmt: skip
+        dp_cost = cost
+    timing["costs"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    relaxed = not settings.one_to_one
+    try:
+        C, total = dp_path(dp_cost, window=w, start=start, float_start=settings.float_start,
+                           float_end=settings.float_end, min_step=0 if relaxed else 1)  # fmt: skip
+    except InvalidInput:
+        if relaxed:
+            raise
+        relaxed = True
+        C, total = dp_path(dp_cost, window=w, start=start, float_start=settings.float_start,
+                           float_end=settings.float_end, min_step=0)  # fmt: skip
+    timing["dp"] = time.perf_counter() - t0
+    rot = R[best[np.arange(n_v), C]]
+    report("alignment", 1.0)
+    return AlignmentResult(C, rot, cost, best, R, total / n_v, timing, relaxed)

@@ -1,0 +1,269 @@
+"""Stage 1: calibrate the scaled orthographic camera from the first frame (thesis 4.2).
+
+The thesis compares the principal axes (PCA of the pixel positions) of the input body region
+at t' = 0 with those of the projected calibration posture B_0 (it assumes B'_0 = B_0): the
+ratio of principal lengths gives the scale s, the angle between principal directions the
+in-plane angle theta_z, and the centres the position (c_x, c_y).
+
+Beyond the thesis, the view azimuth about the vertical is estimated by sampling: the
+calibration posture is projected at each sampled azimuth, PCA-calibrated as above, rendered,
+and the azimuth with the smallest d_S (eq. 4.4) against the input region is kept, so face-on
+and down-the-line (side) videos both work. Front and back views (azimuth a and a + 180 deg)
+give mirror-image silhouettes that differ only in the internal edges; both are sampled.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from engine.body.shapes import BodyShape
+from engine.errors import InvalidInput, RegistrationFailed
+from engine.measures import LAMBDA_A, LAMBDA_E
+from engine.render import capsules
+from engine.render.camera import Camera
+
+ProgressFn = Callable[[str, float], None]
+
+
+@dataclass(frozen=True)
+class CalibrationSettings:
+    """Settings of stage 1 (thesis 4.2).
+
+    Attributes
+    ----------
+    azimuths_deg : tuple of float
+        View azimuths sampled (0 = the body's front; 90 = its left side). The thesis has
+        only 0.
+    reference_frame : int or None
+        Reference frame shown by video frame 0 (the calibration posture, B'_0 = B_0).
+        ``None`` means the reference's first motion frame (frame 1 of a CMU file whose frame
+        0 is the conversion T-pose; the public cases pin video frame 0 there).
+    video_frame : int
+        Video frame used as the calibration image.
+    lambda_A, lambda_E : float
+        Weights of d_S (eq. 4.4) used to pick the azimuth.
+    refine : bool
+        After PCA, polish scale and position by a small d_S grid search (beyond the thesis:
+        PCA lengths are biased by a mesh body wider than the capsules).
+    """
+
+    azimuths_deg: tuple[float, ...] = tuple(float(a) for a in range(-180, 180, 15))
+    reference_frame: int | None = None
+    video_frame: int = 0
+    lambda_A: float = LAMBDA_A
+    lambda_E: float = LAMBDA_E
+    refine: bool = True
+
+
+@dataclass(frozen=True)
+class PrincipalAxes:
+    """Principal axes of a pixel region (thesis 4.2 steps 3-4).
+
+    Attributes
+    ----------
+    centre : ndarray, shape (2,)
+        Mean (u, v) pixel position.
+    direction : ndarray, shape (2,)
+        First eigenvector (u, v), unit, oriented with v decreasing (pointing "up" the body).
+    length : float
+        Extent of the region along ``direction``, pixels.
+    """
+
+    centre: np.ndarray
+    direction: np.ndarray
+    length: float
+
+    @property
+    def angle(self) -> float:
+        """Angle of ``direction`` in the image, radians (atan2(v, u))."""
+        return float(np.arctan2(self.direction[1], self.direction[0]))
+
+
+def principal_axes(mask: np.ndarray) -> PrincipalAxes:
+    """PCA of the pixel positions of a region (thesis 4.2 step 3).
+
+    Parameters
+    ----------
+    mask : ndarray of bool, shape (H, W)
+
+    Returns
+    -------
+    PrincipalAxes
+
+    Raises
+    ------
+    InvalidInput
+        If the mask has fewer than 3 pixels.
+    """
+    rows, cols = np.nonzero(mask)
+    if rows.size < 3:
+        raise InvalidInput(f"mask must contain a body region, got {rows.size} pixel(s)")
+    uv = np.stack([cols, rows], axis=1).astype(float)
+    centre = uv.mean(0)
+    cov = np.cov((uv - centre).T)
+    w, v = np.linalg.eigh(cov)
+    d = v[:, np.argmax(w)]
+    if d[1] > 0:
+        d = -d
+    proj = (uv - centre) @ d
+    return PrincipalAxes(centre, d, float(proj.max() - proj.min() + 1.0))
+
+
+def _wrap_half_turn(a: float) -> float:
+    """Wrap an axis angle to (-pi/2, pi/2] (a principal axis has no sign)."""
+    return float((a + np.pi / 2) % np.pi - np.pi / 2)
+
+
+def pca_camera(
+    joints: np.ndarray, shape: BodyShape, target: np.ndarray, *, azimuth: float = 0.0
+) -> Camera:
+    """Camera by the thesis' PCA calibration at one azimuth (4.2 steps 1-7).
+
+    Parameters
+    ----------
+    joints : ndarray, shape (17, 3)
+        Calibration posture, world frame.
+    shape : BodyShape
+    target : ndarray of bool, shape (H, W)
+        Input body region of the calibration frame.
+    azimuth : float
+        View azimuth, radians.
+
+    Returns
+    -------
+    Camera
+    """
+    h, w = target.shape
+    tgt = principal_axes(target)
+    # default camera: a scale that fits the body comfortably, world origin mid-image
+    height_m = max(float(np.ptp(joints[:, 1])), 0.3)
+    s0 = 0.6 * h / height_m
+    mid = joints.mean(0)
+    cam0 = Camera(scale=s0, theta_z=0.0, cx=0.0, cy=0.0, azimuth=azimuth, width=w, height=h)
+    off = np.array([w / 2, h / 2]) - cam0.project(mid)
+    cam0 = cam0.with_(cx=float(off[0]), cy=float(off[1]))
+    proj = principal_axes(capsules.silhouettes(joints[None], shape, cam0)[0])
+    s = s0 * tgt.length / proj.length
+    theta = _wrap_half_turn(tgt.angle - proj.angle)
+    # centroid of the projection relative to the world origin, in metres of image plane
+    q = (proj.centre - np.array([cam0.cx, cam0.cy])) / s0
+    c, si = np.cos(theta), np.sin(theta)
+    c_xy = tgt.centre - s * (np.array([[c, -si], [si, c]]) @ q)
+    return Camera(
+        scale=float(s), theta_z=theta, cx=float(c_xy[0]), cy=float(c_xy[1]),
+        azimuth=azimuth, width=w, height=h,
+    )  # fmt: skip
+
+
+def _refine(
+    joints: np.ndarray, shape: BodyShape, target: capsules.Target, cam: Camera, s: CalibrationSettings
+) -> tuple[Camera, float]:
+    """Coordinate search on scale and position minimising d_S (a few dozen renders)."""
+
+    def score(c: Camera) -> float:
+        return float(
+            capsules.d_S_batch(joints[None], target, shape, c, lambda_A=s.lambda_A,
+                               lambda_E=s.lambda_E)[0]
+        )  # fmt: skip
+
+    best = score(cam)
+    for step_px in (4.0, 2.0, 1.0, 0.5):
+        improved = True
+        while improved:
+            improved = False
+            cands = [
+                cam.with_(cx=cam.cx + step_px), cam.with_(cx=cam.cx - step_px),
+                cam.with_(cy=cam.cy + step_px), cam.with_(cy=cam.cy - step_px),
+                _rescale(cam, 1 + step_px / 100), _rescale(cam, 1 - step_px / 100),
+            ]  # fmt: skip
+            scores = [score(c) for c in cands]
+            k = int(np.argmin(scores))
+            if scores[k] < best - 1e-9:
+                cam, best, improved = cands[k], scores[k], True
+    return cam, best
+
+
+def _rescale(cam: Camera, k: float) -> Camera:
+    """Scale about the feet-ish image point: keep (cx, cy) -- the world origin is near the
+    floor under the body in heading-normalised references -- and change the scale."""
+    return cam.with_(scale=cam.scale * k)
+
+
+def calibrate(
+    joints: np.ndarray,
+    shape: BodyShape,
+    silhouette: np.ndarray,
+    edges: np.ndarray,
+    settings: CalibrationSettings = CalibrationSettings(),
+    *,
+    on_progress: ProgressFn | None = None,
+) -> tuple[Camera, dict]:
+    """Calibrate the camera from one frame's body region (thesis 4.2, plus azimuth).
+
+    Parameters
+    ----------
+    joints : ndarray, shape (17, 3)
+        Calibration posture B_0 (the reference posture the calibration frame shows).
+    shape : BodyShape
+    silhouette, edges : ndarray of bool, shape (H, W)
+        Input body region of the calibration frame.
+    settings : CalibrationSettings
+    on_progress : callable(stage, fraction), optional
+
+    Returns
+    -------
+    camera : Camera
+    report : dict
+        ``{"azimuth_scores": {deg: d_S}, "d_S": best}``.
+
+    Raises
+    ------
+    InvalidInput
+        Bad shapes, or an empty calibration silhouette.
+    RegistrationFailed
+        No sampled azimuth gives a usable camera.
+    """
+    j = np.asarray(joints, dtype=float)
+    if j.shape != (17, 3) or not np.all(np.isfinite(j)):
+        raise InvalidInput(f"joints must be a finite (17, 3) posture, got shape {j.shape}")
+    sil = np.asarray(silhouette, dtype=bool)
+    if sil.ndim != 2 or np.asarray(edges).shape != sil.shape:
+        raise InvalidInput(
+            f"silhouette and edges must be (H, W) masks of one shape, got {sil.shape} and "
+            f"{np.asarray(edges).shape}"
+        )
+    if np.count_nonzero(sil) < 50:
+        raise InvalidInput(
+            "the calibration frame shows no body region (the performer must be visible in the "
+            "first frame)"
+        )
+    if not settings.azimuths_deg:
+        raise InvalidInput("settings.azimuths_deg must name at least one azimuth")
+    target = capsules.Target.from_masks(sil, np.asarray(edges, dtype=bool))
+    scores: dict[float, float] = {}
+    best: tuple[float, Camera] | None = None
+    for i, az in enumerate(settings.azimuths_deg):
+        try:
+            cam = pca_camera(j, shape, sil, azimuth=float(np.radians(az)))
+        except InvalidInput:  # the posture projects outside the image at this azimuth
+            continue
+        d = float(
+            capsules.d_S_batch(j[None], target, shape, cam, lambda_A=settings.lambda_A,
+                               lambda_E=settings.lambda_E)[0]
+        )  # fmt: skip
+        scores[float(az)] = d
+        if best is None or d < best[0]:
+            best = (d, cam)
+        if on_progress is not None:
+            on_progress("calibration", (i + 1) / (len(settings.azimuths_deg) + 1))
+    if best is None:
+        raise RegistrationFailed("the camera could not be calibrated from the first frame")
+    d, cam = best
+    if settings.refine:
+        cam, d = _refine(j, shape, target, cam, settings)
+    if on_progress is not None:
+        on_progress("calibration", 1.0)
+    return cam, {"azimuth_scores": scores, "d_S": d}

@@ -1,0 +1,69 @@
+"""Stage 1 (thesis 4.2): the camera of public case P1 is recovered from its first frame."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from engine.body.shapes import BodyShape
+from engine.errors import InvalidInput
+from engine.render import capsules
+from engine.render.camera import Camera
+from engine.stages.calibration import calibrate, principal_axes
+from tests.conftest import BENCH_CASES
+
+P1 = BENCH_CASES / "P1_warp_64_29"
+
+
+def test_recovers_a_rendered_camera_and_azimuth():
+    shape = BodyShape.default(1.75)
+    from engine.body.kinematics import forward_kinematics
+
+    j = forward_kinematics(shape.offsets, np.array([0, 1.0, 0]), np.broadcast_to(np.eye(3), (12, 3, 3)))
+    true = Camera(scale=100.0, theta_z=np.radians(3), cx=150, cy=200, azimuth=np.radians(90))
+    r = capsules.render(j, shape, true)
+    cam, rep = calibrate(j, shape, r.silhouette, r.edges)
+    assert cam.scale == pytest.approx(100.0, rel=0.02)
+    assert abs(np.degrees(cam.theta_z) - 3) < 2
+    assert abs(abs(np.degrees(cam.azimuth)) - 90) < 1e-6  # +-90: mirror-symmetric T-pose
+
+
+@pytest.mark.skipif(not P1.exists(), reason="public cases not beside the clone")
+@pytest.mark.xfail(strict=True, reason="measured scale -3.5 % (40 frames) / -2.0 % (full video)")
+def test_public_case_p1_camera():
+    from engine.io.bvh import load_reference
+    from engine.io.video import read_video
+    from engine.stages.foreground import extract_foreground
+
+    ref = load_reference(P1 / "reference.bvh")
+    truth = Camera.from_dict(json.loads((P1 / "truth.json").read_text())["camera"])
+    v = read_video(P1 / "video.mp4", max_frames=40)
+    fg = extract_foreground(v.frames)
+    j = ref.motion.joints[ref.motion.first_motion_frame]
+    cam, _ = calibrate(j, ref.shape, fg.silhouettes[0], fg.edges[0])
+    assert cam.scale == pytest.approx(truth.scale, rel=0.03)
+    assert abs(np.degrees(cam.theta_z - truth.theta_z)) < 2
+    assert abs(np.degrees(cam.azimuth)) < 1e-6
+
+
+def test_principal_axes_of_a_bar():
+    m = np.zeros((50, 50), bool)
+    m[5:45, 20:24] = True
+    pa = principal_axes(m)
+    assert pa.length == pytest.approx(40, abs=1)
+    assert abs(pa.direction[0]) < 1e-6
+
+
+def test_validation():
+    shape = BodyShape.default()
+    z = np.zeros((20, 20), bool)
+    with pytest.raises(InvalidInput, match="joints must be"):
+        calibrate(np.zeros((3, 3)), shape, z, z)
+    with pytest.raises(InvalidInput, match="silhouette and edges"):
+        calibrate(np.zeros((17, 3)), shape, z, np.zeros((3, 3), bool))
+    with pytest.raises(InvalidInput, match="no body region"):
+        calibrate(np.zeros((17, 3)), shape, z, z)
+    with pytest.raises(InvalidInput, match="at least 3|body region"):
+        principal_axes(z)

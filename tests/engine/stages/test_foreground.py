@@ -1,0 +1,60 @@
+"""Stage 0 (thesis 4.1): silhouettes of public case P1 against the truth body."""
+
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+from engine.errors import InvalidInput
+from engine.render import capsules
+from engine.render.camera import Camera
+from engine.stages.foreground import extract_foreground
+from tests.conftest import BENCH_CASES
+
+P1 = BENCH_CASES / "P1_warp_64_29"
+
+
+def test_synthetic_blob_on_static_background(rng):
+    bg = rng.integers(0, 255, (60, 80, 3), dtype=np.uint8)
+    frames = np.repeat(bg[None], 12, 0)
+    for i in range(12):
+        frames[i, 20:45, 10 + 4 * i : 22 + 4 * i] = (20, 60, 200)
+    fg = extract_foreground(frames)
+    truth = np.zeros((60, 80), bool)
+    truth[20:45, 10 + 4 * 5 : 22 + 4 * 5] = True
+    iou = (fg.silhouettes[5] & truth).sum() / (fg.silhouettes[5] | truth).sum()
+    assert iou > 0.8
+    assert "no_person" not in fg.flags[5]
+
+
+def test_validation():
+    with pytest.raises(InvalidInput, match="frames must be uint8"):
+        extract_foreground(np.zeros((1, 4, 4, 3), np.uint8))
+
+
+@pytest.mark.skipif(not P1.exists(), reason="public cases not beside the clone")
+@pytest.mark.xfail(strict=True, reason="measured precision 0.89 vs dilated capsules (GrabCut leaks)")
+def test_public_case_p1_matches_truth_body():
+    from engine.io.bvh import load_reference
+    from engine.io.video import read_video
+
+    truth = json.loads((P1 / "truth.json").read_text())
+    cam = Camera.from_dict(truth["camera"])
+    shape = load_reference(P1 / "reference.bvh").shape
+    v = read_video(P1 / "video.mp4", max_frames=40)
+    fg = extract_foreground(v.frames)
+    # The generator's mesh is wider than our capsules (clothes, shoes): compare the
+    # capsule render dilated by 4 px with the silhouette, and require the silhouette to
+    # cover the (undilated) capsule body.
+    prec, rec = [], []
+    for f in truth["frames"][:40:8]:
+        m = capsules.silhouettes(np.array(f["joints_3d"])[None], shape, cam)[0]
+        big = cv2.dilate(m.astype(np.uint8), np.ones((9, 9), np.uint8)) > 0
+        s = fg.silhouettes[f["t"]]
+        prec.append((s & big).sum() / s.sum())
+        rec.append((s & m).sum() / m.sum())
+    assert np.mean(prec) >= 0.9
+    assert np.mean(rec) >= 0.9
