@@ -1,0 +1,237 @@
+"""Real redis-server and real `celery worker` subprocesses for the integration tests.
+
+Every process a fixture starts is stopped by its finalizer (SIGTERM, then SIGKILL of its
+process group), so a failing test leaves nothing running.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from tests.conftest import BENCH_CASES, REPO
+from worker import celery_app, jobs
+from worker.contract import AnalysisJob
+from worker.settings import WorkerSettings
+
+CASE = BENCH_CASES / "P1_warp_64_29"
+REDIS_SERVER = shutil.which("redis-server") or "/usr/bin/redis-server"
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def stop_process(proc: subprocess.Popen, timeout: float = 10.0) -> None:
+    if proc.poll() is not None:
+        return
+    try:
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(timeout)
+    except subprocess.TimeoutExpired:
+        pass
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)  # pool children too
+    except ProcessLookupError:
+        pass
+    proc.wait(5)
+
+
+@pytest.fixture(scope="session")
+def redis_url(tmp_path_factory) -> str:
+    if not os.path.exists(REDIS_SERVER):
+        pytest.skip("redis-server is not installed (apt-get install redis-server)")
+    port = free_port()
+    workdir = tmp_path_factory.mktemp("redis")
+    proc = subprocess.Popen(
+        [
+            REDIS_SERVER,
+            "--port",
+            str(port),
+            "--bind",
+            "127.0.0.1",
+            "--save",
+            "",
+            "--appendonly",
+            "no",
+            "--dir",
+            str(workdir),
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
+    try:
+        import redis
+
+        client = redis.Redis(port=port)
+        deadline = time.monotonic() + 10
+        while True:
+            try:
+                client.ping()
+                break
+            except redis.exceptions.ConnectionError:
+                if time.monotonic() > deadline or proc.poll() is not None:
+                    raise RuntimeError("redis-server did not start") from None
+                time.sleep(0.05)
+        yield f"redis://127.0.0.1:{port}/0"
+    finally:
+        stop_process(proc)
+
+
+class Workers:
+    """Starts `celery worker` subprocesses sharing one environment; stops them all at the end."""
+
+    def __init__(self, env: dict, log_dir: Path):
+        self.env, self.log_dir, self.procs = env, log_dir, []
+
+    def start(self, concurrency: int = 1, name: str | None = None) -> subprocess.Popen:
+        name = name or f"w{len(self.procs)}"
+        log = open(self.log_dir / f"{name}.log", "ab")  # noqa: SIM115 - closed with the process
+        proc = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "celery",
+                "-A",
+                "worker.celery_app",
+                "worker",
+                "--concurrency",
+                str(concurrency),
+                "--loglevel",
+                "INFO",
+                "--hostname",
+                f"{name}-{os.getpid()}@%h",
+                "--without-gossip",
+                "--without-mingle",
+            ],
+            env=self.env,
+            cwd=REPO,
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
+        log.close()
+        self.procs.append(proc)
+        return proc
+
+    def kill(self, proc: subprocess.Popen) -> None:
+        """SIGKILL the worker and its pool children: no warm shutdown, no ack, no requeue."""
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(5)
+
+    def logs(self) -> str:
+        return "\n".join(p.read_text(errors="replace") for p in sorted(self.log_dir.glob("*.log")))
+
+    def stop_all(self) -> None:
+        for proc in self.procs:
+            stop_process(proc)
+
+
+@pytest.fixture
+def worker_env(tmp_path, redis_url) -> dict:
+    """Environment of the workers and of this process' Celery app (configured here)."""
+    data = tmp_path / "data"
+    env = dict(os.environ)
+    env.update(
+        COACH_BROKER_URL=redis_url,
+        COACH_RESULT_BACKEND=redis_url,
+        COACH_DATA_DIR=str(data),
+        PYTHONPATH=os.pathsep.join(p for p in (str(REPO), env.get("PYTHONPATH", "")) if p),
+        PYOPENGL_PLATFORM="egl",
+        COACH_CHUNKS="2",
+    )
+    env.pop("COACH_PIPELINE_MODULE", None)
+    return env
+
+
+@pytest.fixture
+def workers(worker_env, tmp_path, redis_url):
+    import redis
+
+    redis.Redis.from_url(redis_url).flushdb()  # each test starts with an empty queue
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    pool = Workers(worker_env, logs)
+    celery_app.configure(WorkerSettings.from_env(worker_env))
+    yield pool
+    pool.stop_all()
+    celery_app.configure(WorkerSettings.from_env())
+
+
+def wait_for(
+    work_dir: str | Path,
+    predicate: Callable[[dict], bool],
+    timeout: float,
+    workers: Workers | None = None,
+) -> dict:
+    deadline = time.monotonic() + timeout
+    status: dict = {}
+    while time.monotonic() < deadline:
+        status = jobs.read_status(work_dir) or {}
+        if predicate(status):
+            return status
+        time.sleep(0.05)
+    logs = workers.logs()[-4000:] if workers else ""
+    raise AssertionError(f"timed out after {timeout} s; last status {status}\n{logs}")
+
+
+def finished(status: dict) -> bool:
+    return status.get("state") in jobs.TERMINAL
+
+
+@pytest.fixture(scope="session")
+def short_video(tmp_path_factory) -> Path:
+    """16 frames of the P1_warp_64_29 case video (every 4th: the background estimate needs the
+    performer to move), re-encoded to tmp."""
+    src = CASE / "video.mp4"
+    if not src.exists():
+        pytest.skip(f"{CASE} is not beside the clone")
+    import cv2
+
+    out = tmp_path_factory.mktemp("video") / "short.mp4"
+    cap = cv2.VideoCapture(str(src))
+    fps = cap.get(cv2.CAP_PROP_FPS) or 30.0
+    writer = None
+    for _ in range(16):
+        ok, frame = cap.read()
+        for _skip in range(3):
+            cap.read()
+        if not ok:
+            break
+        if writer is None:
+            h, w = frame.shape[:2]
+            writer = cv2.VideoWriter(str(out), cv2.VideoWriter_fourcc(*"mp4v"), fps, (w, h))
+        writer.write(frame)
+    cap.release()
+    writer.release()
+    return out
+
+
+def make_job(tmp_path: Path, video: Path, name: str, settings: dict) -> AnalysisJob:
+    work = tmp_path / "data" / "analyses" / name
+    return AnalysisJob(
+        analysis_id=name,
+        reference_path=str(CASE / "reference.bvh"),
+        video_path=str(video),
+        work_dir=str(work),
+        settings=settings,
+    )
+
+
+def result_without_timing(path: str | Path) -> dict:
+    result = json.loads(Path(path).read_text())
+    result.pop("timing_s", None)
+    return result

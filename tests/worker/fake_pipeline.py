@@ -1,0 +1,107 @@
+"""A stand-in for :mod:`engine.pipeline` with the same API, controllable timing and failures.
+
+Used by the unit tests (passed as ``pipeline=``) and by integration tests that need a stage of
+known length (``COACH_PIPELINE_MODULE=tests.worker.fake_pipeline``). Settings it reads:
+``fake_frames`` (video frames, 12), ``fake_seconds_per_frame`` (0), ``fake_fail`` ("invalid"
+raises InvalidInput in prepare, "registration" RegistrationFailed in select).
+The result is a deterministic function of the inputs' bytes, so runs can be compared.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from engine.errors import InvalidInput, RegistrationFailed
+
+CALLS: list[tuple] = []  # (function, detail) in the calling process; unit tests inspect it
+
+
+def _settings(settings):
+    return settings or {}
+
+
+def _sleep_progress(stage, n, seconds_per_frame, on_progress):
+    for i in range(n):
+        if seconds_per_frame:
+            time.sleep(seconds_per_frame)
+        if on_progress is not None:
+            on_progress(stage, (i + 1) / n)
+
+
+@dataclass
+class Prepared:
+    seed: np.ndarray  # Shape (T',)
+    settings_seconds: float = 0.0
+
+    def save(self, path):
+        np.savez(path, seed=self.seed, settings_seconds=self.settings_seconds)
+
+    @classmethod
+    def load(cls, path):
+        with np.load(path) as z:
+            return cls(seed=z["seed"], settings_seconds=float(z["settings_seconds"]))
+
+    def chunks(self, n_chunks):
+        edges = np.linspace(0, len(self.seed), n_chunks + 1).round().astype(int)
+        return [range(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:], strict=True)]
+
+
+@dataclass
+class CandidateChunk:
+    frames: np.ndarray  # Shape (F,)
+    values: np.ndarray  # Shape (F,)
+
+    def save(self, path):
+        np.savez(path, frames=self.frames, values=self.values)
+
+    @classmethod
+    def load(cls, path):
+        with np.load(path) as z:
+            return cls(frames=z["frames"], values=z["values"])
+
+
+def prepare(reference_path, video_path, settings=None, *, on_progress=None):
+    s = _settings(settings)
+    CALLS.append(("prepare", str(video_path)))
+    if s.get("fake_fail") == "invalid":
+        raise InvalidInput(f"video {Path(video_path).name} has no frames")
+    digest = hashlib.sha256(
+        Path(reference_path).read_bytes()[:4096] + Path(video_path).read_bytes()[:4096]
+    ).digest()
+    n = int(s.get("fake_frames", 12))
+    seed = np.frombuffer((digest * (n // len(digest) + 1))[:n], dtype=np.uint8).astype(float)
+    spf = float(s.get("fake_seconds_per_frame", 0.0))
+    _sleep_progress("foreground", n, spf / 2, on_progress)
+    _sleep_progress("alignment", n, spf / 2, on_progress)
+    return Prepared(seed=seed, settings_seconds=spf)
+
+
+def candidates(prepared, frames, settings=None, *, on_progress=None):
+    CALLS.append(("candidates", (frames.start, frames.stop)))
+    idx = np.arange(frames.start, frames.stop)
+    _sleep_progress("candidates", max(len(idx), 1), prepared.settings_seconds, on_progress)
+    return CandidateChunk(frames=idx, values=prepared.seed[idx] * 2 + 1)
+
+
+def select(prepared, chunks, settings=None, *, on_progress=None):
+    s = _settings(settings)
+    CALLS.append(("select", len(chunks)))
+    if s.get("fake_fail") == "registration":
+        raise RegistrationFailed("no consistent temporal correspondence was found")
+    frames = np.concatenate([c.frames for c in chunks])
+    values = np.concatenate([c.values for c in chunks])
+    if on_progress is not None:
+        on_progress("selection", 1.0)
+    return {
+        "version": 1,
+        "frames": [
+            {"t": int(t), "posture_error_deg": float(v)}
+            for t, v in zip(frames, values, strict=True)
+        ],
+        "segments": [],
+    }

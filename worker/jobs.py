@@ -1,0 +1,442 @@
+"""The worker's work, as plain functions callable without Celery.
+
+Each function runs one engine stage for one analysis, reading its inputs from and writing its
+output to the analysis folder (:mod:`worker.contract` describes the layout):
+
+=============  =====================================  ==========================================
+stage          function                               output (written to a temporary name, then
+                                                      renamed; if it exists the stage is skipped)
+=============  =====================================  ==========================================
+prepare (0-2)  :func:`run_prepare`                    ``stages/prepare.npz``
+candidates (3) :func:`run_candidates` (one chunk)     ``stages/candidates-<i>-of-<n>.npz``
+select (4)     :func:`run_select`                     ``result.json``
+=============  =====================================  ==========================================
+
+:func:`run_all` runs them in order in one process (the embedded sequential mode and tests).
+Because finished outputs are skipped, a redelivered or retried task resumes where the last
+attempt stopped, and two deliveries of the same task cannot corrupt each other (each writes its
+own temporary file; the rename is atomic and both renames carry equivalent content).
+
+Progress goes to ``status.json`` (what the API reads) and to an optional ``publish(meta)``
+callback (the Celery task's ``update_state``). A ``cancel`` marker file in the analysis folder
+is checked between stages and on every progress callback from the engine, so a cancelled
+analysis stops within one progress step.
+
+The engine's pipeline module is a keyword argument (default: the module named by
+``COACH_PIPELINE_MODULE``, normally :mod:`engine.pipeline`), so tests can pass a fake.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import logging
+import os
+import time
+import uuid
+from collections.abc import Callable
+from datetime import UTC, datetime
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+from engine.errors import EngineError
+from worker import metrics
+from worker.contract import AnalysisJob
+
+log = logging.getLogger("coach.worker")
+
+TERMINAL = ("done", "failed", "cancelled")
+CANCEL_MARKER = "cancel"
+
+#: Share of the overall progress bar each stage covers (prepare, candidates, select).
+_SPAN = {"prepare": (0.0, 0.35), "candidates": (0.35, 0.90), "select": (0.90, 1.0)}
+
+#: How often (seconds) engine progress callbacks may rewrite status.json.
+_STATUS_INTERVAL_S = 0.5
+
+Publish = Callable[[dict], None]
+
+
+class Cancelled(Exception):
+    """The analysis was cancelled (its cancel marker exists); not an error, not retried."""
+
+
+class StageTimeout(Exception):
+    """A stage ran past its soft time limit; recorded as the analysis' failure, not retried."""
+
+
+# ---------------------------------------------------------------------------------------------
+# files
+
+
+def write_atomic(path: str | os.PathLike, write: Callable[[Path], Any]) -> Path:
+    """Call ``write(tmp_path)`` then rename ``tmp_path`` to ``path``; return ``path``.
+
+    The temporary name is unique per call and keeps the final suffix (``x.<id>.tmp.npz``)
+    because ``numpy.savez`` appends ``.npz`` to names that do not end in it. A crash leaves only
+    a ``*.tmp.*`` file that the next attempt ignores; readers never see a partial output.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f"{path.stem}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp{path.suffix}")
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    return path
+
+
+def write_json_atomic(path: str | os.PathLike, data: Any) -> Path:
+    def write(tmp: Path) -> None:
+        with open(tmp, "w") as f:
+            json.dump(data, f)
+            f.flush()
+            os.fsync(f.fileno())
+
+    return write_atomic(path, write)
+
+
+class Paths:
+    """Where one analysis keeps its files (layout in :mod:`worker.contract`)."""
+
+    def __init__(self, work_dir: str | os.PathLike):
+        self.work_dir = Path(work_dir)
+        self.status = self.work_dir / "status.json"
+        self.result = self.work_dir / "result.json"
+        self.stages = self.work_dir / "stages"
+        self.cancel = self.work_dir / CANCEL_MARKER
+        self.prepared = self.stages / "prepare.npz"
+        self.tasks = self.work_dir / "tasks.json"
+
+    def chunk(self, index: int, n_chunks: int) -> Path:
+        return self.stages / f"candidates-{index}-of-{n_chunks}.npz"
+
+    def chunks(self, n_chunks: int) -> list[Path]:
+        return [self.chunk(i, n_chunks) for i in range(n_chunks)]
+
+
+def read_status(work_dir: str | os.PathLike) -> dict | None:
+    try:
+        return json.loads(Paths(work_dir).status.read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def write_status(
+    work_dir: str | os.PathLike,
+    state: str,
+    *,
+    stage: str = "",
+    progress: float = 0.0,
+    message: str = "",
+    error: str | None = None,
+    force: bool = False,
+) -> bool:
+    """Replace status.json atomically; return False if it was left alone.
+
+    A terminal state (done, failed, cancelled) is sticky: a chunk still running after a sibling
+    failed or the user cancelled must not turn the status back to "running", and a second
+    failing chunk must not count the analysis twice. ``force`` writes anyway (a new attempt of
+    the whole analysis, or a cancel).
+    """
+    if not force:
+        current = read_status(work_dir)
+        if current is not None and current.get("state") in TERMINAL:
+            return False
+    write_json_atomic(
+        Paths(work_dir).status,
+        {
+            "state": state,
+            "stage": stage,
+            "progress": round(min(max(progress, 0.0), 1.0), 4),
+            "message": message,
+            "error": error,
+            "updated": datetime.now(UTC).isoformat(timespec="milliseconds"),
+        },
+    )
+    return True
+
+
+def request_cancel(work_dir: str | os.PathLike) -> None:
+    """Mark the analysis cancelled: the marker stops running stages, status says cancelled."""
+    paths = Paths(work_dir)
+    paths.work_dir.mkdir(parents=True, exist_ok=True)
+    paths.cancel.touch()
+    current = read_status(work_dir) or {}
+    if current.get("state") not in ("done", "failed"):
+        write_status(
+            work_dir,
+            "cancelled",
+            stage=current.get("stage", ""),
+            progress=current.get("progress", 0.0),
+            message="cancelled",
+            force=True,
+        )
+
+
+def is_cancelled(work_dir: str | os.PathLike) -> bool:
+    return Paths(work_dir).cancel.exists()
+
+
+def check_cancel(job: AnalysisJob) -> None:
+    if is_cancelled(job.work_dir):
+        raise Cancelled(f"analysis {job.analysis_id} was cancelled")
+
+
+# ---------------------------------------------------------------------------------------------
+# logging, progress
+
+
+def log_event(event: str, **fields: Any) -> None:
+    """One structured line: ``analysis.stage_done stage=prepare analysis_id=... seconds=1.2``."""
+    parts = []
+    for key, value in fields.items():
+        if isinstance(value, float):
+            value = f"{value:.3f}"
+        value = str(value)
+        parts.append(f"{key}={json.dumps(value) if (' ' in value or not value) else value}")
+    log.info("%s %s", event, " ".join(parts))
+
+
+class Progress:
+    """The engine's ``on_progress(stage, fraction)``: status.json + publish + cancel check.
+
+    ``lo, hi`` is the span of the overall progress bar this task covers; engine fractions are
+    mapped into it. status.json is rewritten at most every 0.5 s (and on every stage change).
+    """
+
+    def __init__(
+        self, job: AnalysisJob, task_stage: str, lo: float, hi: float, publish: Publish | None
+    ):
+        self.job, self.task_stage, self.lo, self.hi, self.publish = job, task_stage, lo, hi, publish
+        self._last_write = 0.0
+        self._last_stage = ""
+
+    def __call__(self, stage: str, fraction: float) -> None:
+        check_cancel(self.job)
+        progress = self.lo + (self.hi - self.lo) * min(max(float(fraction), 0.0), 1.0)
+        now = time.monotonic()
+        if stage == self._last_stage and now - self._last_write < _STATUS_INTERVAL_S:
+            return
+        self._last_stage, self._last_write = stage, now
+        self.report(stage, progress, f"{stage} {100 * fraction:.0f}%")
+
+    def report(self, stage: str, progress: float, message: str) -> None:
+        # Parallel chunks each know only their own share: never move the shared bar back.
+        current = read_status(self.job.work_dir) or {}
+        if current.get("state") == "running":
+            progress = max(progress, float(current.get("progress") or 0.0))
+        meta = {"stage": stage, "progress": round(progress, 4), "message": message}
+        write_status(self.job.work_dir, "running", **meta)
+        if self.publish is not None:
+            self.publish(meta)
+
+
+def load_pipeline(name: str | None = None) -> ModuleType:
+    """The engine pipeline module (``COACH_PIPELINE_MODULE`` or :mod:`engine.pipeline`)."""
+    return importlib.import_module(
+        name or os.environ.get("COACH_PIPELINE_MODULE") or "engine.pipeline"
+    )
+
+
+def _stage_done(job: AnalysisJob, stage: str, started: float, **extra: Any) -> None:
+    seconds = time.monotonic() - started
+    metrics.inc("coach_stage_runs_total", stage=stage, outcome="done")
+    metrics.observe("coach_stage_seconds", seconds, stage=stage)
+    log_event(
+        "analysis.stage_done", stage=stage, analysis_id=job.analysis_id, seconds=seconds, **extra
+    )
+
+
+def _skipped(job: AnalysisJob, stage: str, output: Path) -> Path:
+    metrics.inc("coach_stage_skipped_total", stage=stage)
+    log_event(
+        "analysis.stage_skipped", stage=stage, analysis_id=job.analysis_id, output=output.name
+    )
+    return output
+
+
+# ---------------------------------------------------------------------------------------------
+# stages
+
+
+def start(job: AnalysisJob) -> bool:
+    """Mark the analysis running; False if it is already finished or cancelled (skip it)."""
+    paths = Paths(job.work_dir)
+    paths.stages.mkdir(parents=True, exist_ok=True)
+    if is_cancelled(job.work_dir):
+        request_cancel(job.work_dir)
+        return False
+    if paths.result.exists():
+        write_status(job.work_dir, "done", stage="select", progress=1.0, message="done", force=True)
+        return False
+    write_status(
+        job.work_dir, "running", stage="queued", progress=0.0, message="started", force=True
+    )
+    log_event("analysis.started", analysis_id=job.analysis_id)
+    return True
+
+
+def run_prepare(
+    job: AnalysisJob, *, pipeline: ModuleType | None = None, publish: Publish | None = None
+) -> Path:
+    """Stages 0-2 (foreground, calibration, approximate alignment) -> ``stages/prepare.npz``."""
+    paths = Paths(job.work_dir)
+    if paths.prepared.exists():
+        return _skipped(job, "prepare", paths.prepared)
+    check_cancel(job)
+    pipeline = pipeline or load_pipeline()
+    progress = Progress(job, "prepare", *_SPAN["prepare"], publish)
+    progress.report("prepare", _SPAN["prepare"][0], "preparing")
+    started = time.monotonic()
+    prepared = pipeline.prepare(
+        job.reference_path, job.video_path, job.settings or None, on_progress=progress
+    )
+    check_cancel(job)
+    write_atomic(paths.prepared, prepared.save)
+    _stage_done(job, "prepare", started)
+    return paths.prepared
+
+
+def run_candidates(
+    job: AnalysisJob,
+    index: int,
+    n_chunks: int,
+    *,
+    pipeline: ModuleType | None = None,
+    publish: Publish | None = None,
+) -> Path:
+    """Stage 3 on chunk ``index`` of ``n_chunks`` -> ``stages/candidates-<i>-of-<n>.npz``."""
+    if not 0 <= index < n_chunks:
+        raise ValueError(f"chunk index must be in [0, {n_chunks}), got {index}")
+    paths = Paths(job.work_dir)
+    out = paths.chunk(index, n_chunks)
+    if out.exists():
+        return _skipped(job, "candidates", out)
+    check_cancel(job)
+    pipeline = pipeline or load_pipeline()
+    prepared = pipeline.Prepared.load(paths.prepared)
+    ranges = prepared.chunks(n_chunks)
+    if index >= len(ranges):
+        # A video shorter than n_chunks frames splits into fewer chunks; select expects only
+        # len(ranges) outputs, so this chunk has nothing to do.
+        log_event("analysis.chunk_empty", analysis_id=job.analysis_id, chunk=index + 1)
+        return out
+    frames = ranges[index]
+    # This chunk's share of the candidates span, offset by the chunks already finished, so
+    # parallel chunks move one bar forward instead of each restarting it.
+    lo, hi = _SPAN["candidates"]
+    done = sum(p.exists() for p in paths.chunks(n_chunks))
+    step = (hi - lo) / n_chunks
+    progress = Progress(job, "candidates", lo + done * step, lo + (done + 1) * step, publish)
+    progress.report("candidates", lo + done * step, f"candidates chunk {index + 1}/{n_chunks}")
+    started = time.monotonic()
+    chunk = pipeline.candidates(prepared, frames, job.settings or None, on_progress=progress)
+    check_cancel(job)
+    write_atomic(out, chunk.save)
+    _stage_done(
+        job,
+        "candidates",
+        started,
+        chunk=f"{index + 1}/{n_chunks}",
+        frames=f"{frames.start}-{frames.stop}",
+    )
+    return out
+
+
+def run_select(
+    job: AnalysisJob,
+    n_chunks: int,
+    *,
+    pipeline: ModuleType | None = None,
+    publish: Publish | None = None,
+    on_result: Callable[[Path], None] | None = None,
+) -> Path:
+    """Stage 4 (selection, errors) over every chunk -> ``result.json``; status becomes done.
+
+    ``on_result(path)`` runs after result.json exists and before status.json says done (the
+    task stores its success there, so whoever sees "done" also sees the task's result).
+    """
+    paths = Paths(job.work_dir)
+    if paths.result.exists():
+        _skipped(job, "select", paths.result)
+    else:
+        check_cancel(job)
+        pipeline = pipeline or load_pipeline()
+        prepared = pipeline.Prepared.load(paths.prepared)
+        expected = paths.chunks(n_chunks)[: len(prepared.chunks(n_chunks))]
+        missing = [p.name for p in expected if not p.exists()]
+        if missing:
+            raise FileNotFoundError(f"stage-3 outputs missing: {', '.join(missing)}")
+        chunks = [pipeline.CandidateChunk.load(p) for p in expected]
+        progress = Progress(job, "select", *_SPAN["select"], publish)
+        progress.report("select", _SPAN["select"][0], "selecting")
+        started = time.monotonic()
+        result = pipeline.select(prepared, chunks, job.settings or None, on_progress=progress)
+        check_cancel(job)
+        result.setdefault("analysis_id", job.analysis_id)
+        write_json_atomic(paths.result, result)
+        _stage_done(job, "select", started)
+    if on_result is not None:
+        on_result(paths.result)
+    if write_status(job.work_dir, "done", stage="select", progress=1.0, message="done"):
+        metrics.inc("coach_analyses_total", state="done")
+        log_event("analysis.done", analysis_id=job.analysis_id)
+    return paths.result
+
+
+def run_all(
+    job: AnalysisJob,
+    n_chunks: int,
+    *,
+    pipeline: ModuleType | None = None,
+    publish: Publish | None = None,
+) -> Path:
+    """Every stage in order in this process (embedded sequential mode); returns result.json.
+
+    Engine errors and cancellation are recorded on the analysis before they propagate.
+    """
+    try:
+        if not start(job):
+            return Paths(job.work_dir).result
+        run_prepare(job, pipeline=pipeline, publish=publish)
+        for i in range(n_chunks):
+            run_candidates(job, i, n_chunks, pipeline=pipeline, publish=publish)
+        return run_select(job, n_chunks, pipeline=pipeline, publish=publish)
+    except (EngineError, Cancelled) as exc:
+        record_failure(job, exc)
+        raise
+
+
+def record_failure(job: AnalysisJob, exc: BaseException, *, stage: str | None = None) -> None:
+    """Record a failed (or cancelled) analysis with a message the user can read."""
+    current = read_status(job.work_dir) or {}
+    stage = stage or current.get("stage", "")
+    if isinstance(exc, Cancelled) or is_cancelled(job.work_dir):
+        state, error = "cancelled", None
+        counted = current.get("state") not in TERMINAL
+        request_cancel(job.work_dir)
+    else:
+        state = "failed"
+        error = str(exc) or type(exc).__name__
+        counted = write_status(
+            job.work_dir,
+            state,
+            stage=stage,
+            progress=current.get("progress", 0.0),
+            message=error,
+            error=error,
+        )
+    if counted:  # once per analysis, however many chunks fail
+        metrics.inc("coach_analyses_total", state=state)
+        metrics.inc("coach_stage_runs_total", stage=stage or "unknown", outcome=state)
+    log_event(
+        f"analysis.{state}",
+        analysis_id=job.analysis_id,
+        stage=stage,
+        error=error or "",
+        error_type=type(exc).__name__,
+    )
