@@ -1,0 +1,786 @@
+"""Stage 3: posture candidates by nonparametric belief propagation (thesis 4.6, 6.4, 6.5, 6.7).
+
+Per video frame, given the target body region S' (silhouette and edges), the camera and one or
+more initial postures (the reference B_C(t') turned by T_t' about the hip, optionally the
+previous frame's candidates), the stage
+
+1. runs nonparametric BP over the 12 body parts (4.6.1-4.6.4, private core in ``_bp.py``):
+   similarity phi = exp(-beta d_S) with the part at the sample and the other parts at their
+   previous-iteration poses (4.6.2), joint constraint psi = J exp(-|x_i - x_j|^2 / sigma^2)
+   with the appendix-A angle limits (4.6.3) and the hardening schedule sigma_k = lambda
+   sigma_{k-1}, a_k = a_{k-1}^(1/lambda) (4.6.4 step 1);
+2. refines the connected best posture by a pattern search on d_S (sub-pixel, 6.4);
+3. resets totally occluded parts to the reference and flags them ``occluded:<joint>`` (6.5);
+4. generates candidates (4.6.5): the reference's depth orientation per part, then flips of
+   n = 1, 2, ... parts about their parent joints (mirror in depth, same projection), dropping
+   those that break the joint limits; the previous frame's best candidate supplies another
+   orientation and, when the reference is far from the image, the initial estimate (6.7).
+
+Frames are independent given stage 2's output, so workers can fan out over frames; the chunk
+helper only threads the previous frame's candidates through.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from engine.body.kinematics import (
+    bone_vectors,
+    forward_kinematics,
+    part_rotations,
+    rotation_about_axis,
+)
+from engine.body.shapes import BodyShape
+from engine.body.skeleton import (
+    BONE_CHILD,
+    BONE_PARENT,
+    JOINTS,
+    LIMIT_A,
+    LIMIT_B,
+    LIMIT_JOINT,
+    LIMIT_MIN_RAD,
+    N_PARTS,
+    PART_BONES,
+    PART_PARENT,
+    PART_ROOT_JOINT,
+)
+from engine.errors import InvalidInput
+from engine.measures import d_B
+from engine.render.camera import Camera
+from engine.render.capsules import PART_CAPSULES, PartScorer, Target, d_A_batch, d_S_batch
+from engine.stages import _bp
+
+ALL_PARTS = tuple(range(N_PARTS))
+
+
+@dataclass(frozen=True)
+class CandidateSettings:
+    """Tuning of stage 3 (thesis 4.6, 5.2.2).
+
+    Defaults are the cheaper settings found with ``benchmarks/candidates.py`` at equal
+    accuracy; :meth:`thesis` gives the thesis' own (lambda 0.9, 40 iterations, 300 samples per
+    part, 50 candidates; 5.2.2).
+
+    Attributes
+    ----------
+    n_samples : int
+        Pose samples per part and iteration, N_l (thesis 300).
+    n_iterations : int
+        BP iterations, N_k (thesis 40).
+    decrease : float
+        Hardening factor lambda of 4.6.4 step 1 (thesis 0.9).
+    sigma0_m : float
+        Initial joint-constraint width sigma, metres (eq. 4.18).
+    a0 : float
+        Initial joint-angle penalty a (eq. 4.17).
+    rot_std0_deg, rot_std_min_deg : float
+        Std of the sampling Gaussian on rotations, first and smallest (step 2); it shrinks
+        with lambda like sigma.
+    pos_std0_m, pos_std_min_m : float
+        Same for root-joint positions.
+    attach_prob : float
+        Probability that a new sample takes its root joint from a parent sample (step 2.1).
+    beta : float
+        Sharpness of phi = exp(-beta d_S): the scale of lambda_A, lambda_E relative to psi.
+    lambda_a, lambda_e, edge_sigma_px, edge_xi : float
+        d_S = lambda_A d_A + lambda_E d_E and the truncated chamfer's sigma, xi (eq. 4.3-4.4).
+        lambda_E defaults to 0: the rendered capsule edges include every internal part
+        outline (an arm over the torso) while stage 0's edges are the silhouette contour and
+        skin contours only, so d_E pushes the arms off the torso; on P1 frames 40-45 the
+        selected candidate's E_3B was 19 deg with d_E and 13 deg without (both without the
+        prior). The thesis setting is 1.
+    refine_sweeps : int
+        Pattern-search sweeps of the sub-pixel refinement (6.4); 0 disables it.
+    refine_step0_deg, refine_min_step_deg : float
+        First and smallest rotation step of the refinement.
+    n_candidates : int
+        Most candidates per frame, N (thesis 25-50).
+    min_flip_deg : float
+        Parts whose bones leave the image plane by less than this are not flipped (the flip
+        would be a near duplicate).
+    occluded_visible_fraction : float
+        A part with less than this fraction of its pixels visible is totally occluded (6.5).
+    n_prev : int
+        Previous-frame candidates used as extra initial postures (6.7).
+    far_margin : float
+        The reference is "far" when its d_S exceeds the previous best candidate's by this.
+    prior_weight : float
+        mu of the selection cost d_S + mu d_B(candidate, initial posture) (d_B in radians,
+        eq. 4.5); see :attr:`FrameCandidates.cost`. 0 ranks by d_S alone (the thesis). The
+        capsule body never matches a real (clothed) silhouette exactly: on the public cases
+        the true posture has d_A ~ 0.1 while postures 10-25 deg away reach 0.05, so without
+        the prior the lowest-d_S candidate is far worse than the reference. 0.5 per radian
+        means a candidate must explain ~0.045 more of d_S per 5 deg it departs.
+    """
+
+    n_samples: int = 40
+    n_iterations: int = 12
+    decrease: float = 0.85
+    sigma0_m: float = 0.05
+    a0: float = 0.5
+    rot_std0_deg: float = 8.0
+    rot_std_min_deg: float = 0.5
+    pos_std0_m: float = 0.02
+    pos_std_min_m: float = 0.002
+    attach_prob: float = 0.5
+    beta: float = 300.0
+    lambda_a: float = 1.0
+    lambda_e: float = 0.0
+    edge_sigma_px: float = 5.0
+    edge_xi: float = 1.0
+    refine_sweeps: int = 6
+    refine_step0_deg: float = 2.0
+    refine_min_step_deg: float = 0.2
+    n_candidates: int = 25
+    min_flip_deg: float = 5.0
+    occluded_visible_fraction: float = 0.05
+    n_prev: int = 3
+    far_margin: float = 0.05
+    prior_weight: float = 0.5
+
+    @classmethod
+    def thesis(cls) -> CandidateSettings:
+        """The thesis' settings (5.2.2): lambda 0.9, 40 iterations, 300 samples, 50 candidates."""
+        return cls(
+            n_samples=300,
+            n_iterations=40,
+            decrease=0.9,
+            n_candidates=50,
+            refine_sweeps=0,
+            lambda_e=1.0,
+            prior_weight=0.0,
+        )
+
+    def validate(self) -> None:
+        if self.n_samples < 2:
+            raise InvalidInput(f"settings.n_samples must be >= 2, got {self.n_samples}")
+        if self.n_iterations < 0:
+            raise InvalidInput(f"settings.n_iterations must be >= 0, got {self.n_iterations}")
+        if not 0.0 < self.decrease <= 1.0:
+            raise InvalidInput(f"settings.decrease must be in (0, 1], got {self.decrease}")
+        if not 0.0 < self.a0 < 1.0:
+            raise InvalidInput(f"settings.a0 must be in (0, 1), got {self.a0}")
+        if self.n_candidates < 1:
+            raise InvalidInput(f"settings.n_candidates must be >= 1, got {self.n_candidates}")
+
+
+@dataclass(frozen=True)
+class FrameCandidates:
+    """Posture candidates of one video frame.
+
+    Attributes
+    ----------
+    candidates : ndarray, shape (K, 17, 3)
+        World frame, metres. Candidate 0 has the reference's depth orientation; the flips
+        share its projection; the initial postures (the reference turned by T_t' and the
+        previous frame's best) come last when they respect the joint limits, so the set is
+        never worse than the start.
+    d_s : ndarray, shape (K,)
+        d_S of each candidate against the target region.
+    flags : tuple of str
+        e.g. ``"occluded:l_wrist"``, ``"reference_far"``.
+    history : ndarray, shape (n_iterations + 1,)
+        d_S of the connected best posture after each BP iteration (0 = initial).
+    prior : ndarray, shape (K,)
+        mu d_B(candidate, initial posture) (``settings.prior_weight``); zeros when unused.
+    """
+
+    candidates: np.ndarray
+    d_s: np.ndarray
+    flags: tuple[str, ...] = ()
+    history: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    prior: np.ndarray | None = None
+
+    @property
+    def cost(self) -> np.ndarray:
+        """Selection cost d_S + prior of each candidate, shape (K,)."""
+        return self.d_s if self.prior is None else self.d_s + self.prior
+
+    @property
+    def best(self) -> np.ndarray:
+        """The candidate with the lowest :attr:`cost`, shape (17, 3)."""
+        return self.candidates[int(np.argmin(self.cost))]
+
+
+# ------------------------------------------------------------------------------ helpers
+
+
+def limits_ok(joints: np.ndarray, tol_rad: float = 1e-6) -> np.ndarray:
+    """Whether postures (..., 17, 3) respect every joint-angle limit (appendix A), (...)."""
+    j = np.asarray(joints, float)
+    u = j[..., LIMIT_A, :] - j[..., LIMIT_JOINT, :]
+    w = j[..., LIMIT_B, :] - j[..., LIMIT_JOINT, :]
+    cos = (u * w).sum(-1) / np.maximum(
+        np.linalg.norm(u, axis=-1) * np.linalg.norm(w, axis=-1), 1e-12
+    )
+    return np.all(np.arccos(np.clip(cos, -1, 1)) >= LIMIT_MIN_RAD - tol_rad, axis=-1)
+
+
+def _subtree(part: int) -> tuple[int, ...]:
+    out = [part]
+    for q in range(N_PARTS):
+        if q != part and any(p in out for p in _ancestors(q)):
+            out.append(q)
+    return tuple(sorted(out))
+
+
+def _ancestors(q: int) -> list[int]:
+    out = []
+    while PART_PARENT[q] >= 0:
+        q = int(PART_PARENT[q])
+        out.append(q)
+    return out
+
+
+_SUBTREES = tuple(_subtree(p) for p in range(N_PARTS))
+_SUBTREE_JOINTS = tuple(
+    np.array(sorted({int(BONE_CHILD[b]) for q in st for b in PART_BONES[q]})) for st in _SUBTREES
+)
+
+
+def _from_bones(root: np.ndarray, vec: np.ndarray) -> np.ndarray:
+    """Joints (..., 17, 3) from root (..., 3) and bone vectors (..., 16, 3)."""
+    j = np.empty(vec.shape[:-2] + (17, 3))
+    j[..., 0, :] = root
+    for b in range(16):
+        j[..., BONE_CHILD[b], :] = j[..., BONE_PARENT[b], :] + vec[..., b, :]
+    return j
+
+
+def _frame_offsets(ref: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """Default-posture bone vectors (16, 3) under which ``ref`` (17, 3) is exactly rigid per part.
+
+    A BVH clavicle moves relative to the spine, so the upper chest is not rigid across frames;
+    taking the part shapes from this frame's reference posture makes it reachable exactly.
+    """
+    R = part_rotations(ref, offsets)
+    vec = bone_vectors(ref)
+    from engine.body.skeleton import BONE_PART
+
+    return np.einsum("bji,bj->bi", R[BONE_PART], vec)
+
+
+class _Scorer:
+    """d_S against one target region (thesis 4.4.1, eq. 4.4) for the three uses of stage 3.
+
+    ``part`` scores poses of one part with the others at the context posture (BP, 4.6.2;
+    incremental :class:`~engine.render.capsules.PartScorer`), ``full`` scores whole postures
+    (refinement, candidates; :func:`~engine.render.capsules.d_S_batch`). Both are exact
+    renders of the capsule body, so their values agree.
+    """
+
+    def __init__(
+        self,
+        target: Target,
+        shape: BodyShape,
+        camera: Camera,
+        joints: np.ndarray,
+        s: CandidateSettings,
+    ) -> None:
+        self.target, self.shape, self.camera = target, shape, camera
+        self.lam = (s.lambda_a, s.lambda_e)
+        self.parts = PartScorer(
+            target, shape, camera, joints, lambda_A=s.lambda_a, lambda_E=s.lambda_e
+        )
+        self.n_evals = 0
+
+    def set_pose(self, joints: np.ndarray) -> None:
+        self.parts.set_pose(joints)
+
+    def part(self, part: int, samples: np.ndarray) -> np.ndarray:
+        self.n_evals += len(samples)
+        return self.parts.score(part, samples)
+
+    def full(self, postures: np.ndarray) -> np.ndarray:
+        self.n_evals += len(postures)
+        return d_S_batch(
+            postures,
+            self.target,
+            self.shape,
+            self.camera,
+            lambda_A=self.lam[0],
+            lambda_E=self.lam[1],
+        )
+
+    def visible_fraction(self, joints: np.ndarray) -> np.ndarray:
+        """Fraction of each part's projected area that is front-most in ``joints``, (12,).
+
+        The part's own area is the capsules' analytic area (2 r l + pi r^2 in pixels; the
+        few overlaps inside a part make it a slight overestimate, which only errs towards
+        calling a part occluded when it nearly is).
+        """
+        self.parts.set_pose(joints)
+        labels = self.parts.render().labels
+        seen = np.bincount(labels[labels >= 0].astype(np.int64), minlength=N_PARTS)
+        pc_uv = self.camera.project(joints)
+        from engine.body.shapes import CAPSULE_A, CAPSULE_B, CAPSULE_T
+
+        a, b = pc_uv[CAPSULE_A], pc_uv[CAPSULE_B]
+        length = np.linalg.norm(b - a, axis=-1) * np.abs(CAPSULE_T[:, 1] - CAPSULE_T[:, 0])
+        r = np.asarray(self.shape.radii) * self.camera.scale
+        area = 2.0 * r * length + np.pi * r**2
+        own = np.array([area[PART_CAPSULES[p]].sum() for p in range(N_PARTS)])
+        return seen / np.maximum(own, 1.0)
+
+
+#: Radius groups of :func:`fit_radii`: the torso, the head, the arms, the legs.
+RADIUS_GROUPS: dict[str, tuple[int, ...]] = {
+    "torso": (0, 1, 2),
+    "head": (3,),
+    "arms": (4, 5, 6, 7),
+    "legs": (8, 9, 10, 11),
+}
+
+
+def fit_radii(
+    silhouette: np.ndarray,
+    joints: np.ndarray,
+    shape: BodyShape,
+    camera: Camera,
+    *,
+    scale_range: tuple[float, float] = (0.7, 1.8),
+    per_group: bool = True,
+) -> BodyShape:
+    """Retarget the capsule radii to the performer's body in a frame of known posture.
+
+    Thesis 2.1.1 item 3 ("retarget the shape to the performer"): in the calibration frame the
+    performer's posture is the reference's (thesis 4.2 assumes B'_0 = B_0), so the silhouette
+    there shows the performer's girth (clothing included). One scale for every radius is
+    chosen to maximise the silhouette overlap (1 - d_A, thesis eq. 4.1), then, with
+    ``per_group``, one factor per group of :data:`RADIUS_GROUPS` (coordinate search, two
+    rounds). Bone lengths are not changed. Without this, stage 3 bends the capsule body to
+    fill a wider silhouette and the "best" posture is worse than the reference.
+
+    Parameters
+    ----------
+    silhouette : ndarray of bool, shape (H, W)
+        Body region of the calibration frame.
+    joints : ndarray, shape (17, 3)
+        The known posture in that frame, world frame.
+    shape : BodyShape
+        The body to retarget (the reference's).
+    camera : Camera
+        Stage 1's camera.
+    scale_range : (float, float), keyword-only
+        Smallest and largest global radius factor tried (default 0.7-1.8).
+    per_group : bool, keyword-only
+        Also fit one factor per radius group (default True).
+
+    Returns
+    -------
+    BodyShape
+        ``shape`` with its radii scaled.
+
+    Raises
+    ------
+    InvalidInput
+        Shapes that do not match or an empty silhouette.
+    """
+    sil = np.asarray(silhouette)
+    if not isinstance(camera, Camera) or not isinstance(shape, BodyShape):
+        raise InvalidInput("fit_radii needs a Camera and a BodyShape")
+    if sil.shape != (camera.height, camera.width):
+        raise InvalidInput(
+            f"silhouette must have shape (H, W) = {(camera.height, camera.width)}, got {sil.shape}"
+        )
+    if not sil.any():
+        raise InvalidInput("silhouette is empty: no body region to fit")
+    j = np.asarray(joints, float)
+    if j.shape != (17, 3) or not np.all(np.isfinite(j)):
+        raise InvalidInput(f"joints must be a finite (17, 3) posture, got shape {j.shape}")
+    target = Target.from_masks(sil, np.zeros_like(sil, dtype=bool))
+    radii0 = np.asarray(shape.radii, float)
+
+    def cost(factors: np.ndarray) -> float:
+        return float(
+            d_A_batch(j[None], target, BodyShape(shape.offsets, radii0 * factors), camera)[0]
+        )
+
+    grid = np.linspace(scale_range[0], scale_range[1], 23)
+    costs = [cost(np.full_like(radii0, k)) for k in grid]
+    k0 = float(grid[int(np.argmin(costs))])
+    step = grid[1] - grid[0]
+    for _ in range(4):  # golden-free bracket refinement: three points around the best
+        trial = [k0 - step / 2, k0, k0 + step / 2]
+        k0 = trial[int(np.argmin([cost(np.full_like(radii0, k)) for k in trial]))]
+        step /= 2
+    factors = np.full_like(radii0, k0)
+    if per_group:
+        from engine.body.shapes import CAPSULE_PART
+
+        for _ in range(2):
+            for parts in RADIUS_GROUPS.values():
+                caps = np.isin(CAPSULE_PART, parts)
+                best_f, best_c = factors.copy(), cost(factors)
+                for g in (0.7, 0.8, 0.9, 0.95, 1.05, 1.1, 1.2, 1.35, 1.5):
+                    f = factors.copy()
+                    f[caps] *= g
+                    c = cost(f)
+                    if c < best_c - 1e-6:
+                        best_f, best_c = f, c
+                factors = best_f
+    return BodyShape(offsets=shape.offsets, radii=radii0 * factors)
+
+
+def _refine(
+    scorer: _Scorer, joints: np.ndarray, camera: Camera, s: CandidateSettings
+) -> tuple[np.ndarray, float]:
+    """Sub-pixel pattern search on d_S over subtree rotations and root shifts (thesis 6.4)."""
+    cur = joints.copy()
+    best = float(scorer.full(cur[None])[0])
+    n = camera.view_dir
+    step = np.radians(s.refine_step0_deg)
+    px = 1.0 / camera.scale
+    for _ in range(s.refine_sweeps):
+        improved = False
+        for p in range(N_PARTS):
+            J = cur[PART_ROOT_JOINT[p]]
+            sub = _SUBTREE_JOINTS[p]
+            own = np.array([BONE_CHILD[b] for b in PART_BONES[p]])
+            d = (cur[own] - J).mean(0)
+            a1 = np.cross(n, d)
+            axes = [n, a1] if np.linalg.norm(a1) > 1e-9 else [n]
+            if len(PART_BONES[p]) > 1:
+                axes.append(np.cross(n, a1) if np.linalg.norm(a1) > 1e-9 else d)
+            Rs = [rotation_about_axis(ax, sg * step) for ax in axes for sg in (-1.0, 1.0)]
+            samples = []
+            for R in Rs:
+                q = cur.copy()
+                q[sub] = J + (cur[sub] - J) @ R.T
+                samples.append(q)
+            if p == 0:
+                for vec in camera.R_cam_world[:2]:
+                    for sg in (-1.0, 1.0):
+                        samples.append(cur + sg * 0.5 * px * vec * max(step / np.radians(1), 0.5))
+            samples = np.stack(samples)
+            sc = scorer.full(samples)
+            k = int(np.argmin(sc))
+            if sc[k] < best - 1e-9 and limits_ok(samples[k]):
+                cur, best, improved = samples[k], float(sc[k]), True
+        if not improved:
+            step /= 2.0
+            if step < np.radians(s.refine_min_step_deg):
+                break
+    return cur, best
+
+
+def _occluded_parts(scorer: _Scorer, joints: np.ndarray, thr: float) -> list[int]:
+    vis = scorer.visible_fraction(joints)
+    return [p for p in range(N_PARTS) if vis[p] < thr]
+
+
+def _flip(vec: np.ndarray, parts: tuple[int, ...], n: np.ndarray) -> np.ndarray:
+    """Mirror the bones of ``parts`` in depth along view direction n (projection kept)."""
+    out = vec.copy()
+    bones = [b for p in parts for b in PART_BONES[p]]
+    out[bones] -= 2.0 * (out[bones] @ n)[:, None] * n
+    return out
+
+
+def _orient_like(vec: np.ndarray, source: np.ndarray, n: np.ndarray, min_sin: float) -> np.ndarray:
+    """Give each part of bone vectors ``vec`` the depth orientation of ``source`` (4.6.5 step 3)."""
+    flips = []
+    for p in range(N_PARTS):
+        bones = list(PART_BONES[p])
+        z = vec[bones] @ n
+        zs = source[bones] @ n
+        ls = np.linalg.norm(source[bones], axis=1)
+        if np.max(np.abs(zs) / ls) < min_sin:
+            continue  # the source has no clear depth orientation for this part
+        if float(z @ zs) < 0.0:
+            flips.append(p)
+    return _flip(vec, tuple(flips), n)
+
+
+def generate_candidates(
+    joints: np.ndarray,
+    orientations: list[np.ndarray],
+    camera: Camera,
+    settings: CandidateSettings,
+) -> np.ndarray:
+    """Posture candidates from one estimate (thesis 4.6.5 steps 3-5).
+
+    Parameters
+    ----------
+    joints : ndarray, shape (17, 3)
+        The connected best posture.
+    orientations : list of ndarray (17, 3)
+        Postures whose per-part depth orientation seeds a candidate, the reference first.
+    camera : Camera
+    settings : CandidateSettings
+
+    Returns
+    -------
+    candidates : ndarray, shape (K, 17, 3)
+        Same projection as ``joints``; only those respecting the joint limits (at least one:
+        the first is kept even when it does not, so that a frame always has a candidate).
+    """
+    n = camera.view_dir
+    min_sin = np.sin(np.radians(settings.min_flip_deg))
+    vec = bone_vectors(joints)
+    root = joints[0]
+    seeds = [_orient_like(vec, bone_vectors(o), n, min_sin) for o in orientations]
+    base = seeds[0]
+    depth_sin = [
+        float(
+            np.max(
+                np.abs(base[list(PART_BONES[p])] @ n)
+                / np.linalg.norm(base[list(PART_BONES[p])], axis=1)
+            )
+        )
+        for p in range(N_PARTS)
+    ]
+    flippable = sorted(
+        (p for p in range(N_PARTS) if depth_sin[p] >= min_sin), key=lambda p: depth_sin[p]
+    )
+    out: list[np.ndarray] = []
+    keys: set[tuple[bool, ...]] = set()
+
+    def add(v: np.ndarray) -> None:
+        k = tuple(np.round(v @ n, 4))
+        if k in keys:
+            return
+        keys.add(k)
+        j = _from_bones(root, v)
+        if limits_ok(j) or not out and len(keys) == 1:
+            out.append(j)
+
+    for v in seeds:
+        add(v)
+    for m in range(1, len(flippable) + 1):
+        for combo in itertools.combinations(flippable, m):
+            if len(out) >= settings.n_candidates:
+                break
+            add(_flip(base, combo, n))
+        if len(out) >= settings.n_candidates:
+            break
+    if not out:
+        out.append(_from_bones(root, base))
+    return np.stack(out[: settings.n_candidates])
+
+
+def _append_distinct(cands: np.ndarray, extra: np.ndarray, n_max: int) -> np.ndarray:
+    """``cands`` (K, 17, 3) plus those of ``extra`` (M, 17, 3) not already in it (within 1 mm).
+
+    The extras replace the last candidates when the set is full (they are kept for sure).
+    """
+    new = [e for e in extra if np.min(np.abs(cands - e).max(axis=(1, 2))) > 1e-3]
+    if not new:
+        return cands
+    keep = max(min(len(cands), n_max - len(new)), 1)
+    return np.concatenate([cands[:keep], np.stack(new)])
+
+
+# ------------------------------------------------------------------------------ BP
+
+
+def _check_inputs(
+    sil: np.ndarray, edges: np.ndarray, camera: Camera, shape: BodyShape, init: np.ndarray
+) -> np.ndarray:
+    if not isinstance(camera, Camera):
+        raise InvalidInput(f"camera must be a Camera, got {type(camera).__name__}")
+    if not isinstance(shape, BodyShape):
+        raise InvalidInput(f"shape must be a BodyShape, got {type(shape).__name__}")
+    sil = np.asarray(sil)
+    edges = np.asarray(edges)
+    if sil.ndim != 2 or sil.shape != (camera.height, camera.width):
+        raise InvalidInput(
+            f"target_silhouette must have shape (H, W) = {(camera.height, camera.width)}, "
+            f"got {sil.shape}"
+        )
+    if edges.shape != sil.shape:
+        raise InvalidInput(f"target_edges must have shape {sil.shape}, got {edges.shape}")
+    if not sil.any():
+        raise InvalidInput("target_silhouette is empty: no body region to match")
+    init = np.asarray(init, dtype=float)
+    if init.ndim == 2:
+        init = init[None]
+    if init.ndim != 3 or init.shape[1:] != (17, 3) or init.shape[0] < 1:
+        raise InvalidInput(
+            f"initial_joints must have shape (17, 3) or (M, 17, 3), got {init.shape}"
+        )
+    if not np.all(np.isfinite(init)):
+        raise InvalidInput("initial_joints contains NaN or infinite values")
+    return init
+
+
+def estimate_candidates(
+    target_silhouette: np.ndarray,
+    target_edges: np.ndarray,
+    camera: Camera,
+    shape: BodyShape,
+    initial_joints: np.ndarray,
+    *,
+    settings: CandidateSettings | None = None,
+    rng: np.random.Generator,
+    prev: FrameCandidates | None = None,
+) -> FrameCandidates:
+    """Posture candidates of one frame (thesis 4.6, eq. 4.12-4.21; 6.4, 6.5, 6.7).
+
+    Parameters
+    ----------
+    target_silhouette, target_edges : ndarray of bool, shape (H, W)
+        The input body region S' and its edges (stage 0).
+    camera : Camera
+        Stage 1's camera; its (height, width) must be the image's.
+    shape : BodyShape
+        The performer's body (the reference's by default).
+    initial_joints : ndarray, shape (17, 3) or (M, 17, 3)
+        Initial estimates, world frame; the first is the reference posture B_C(t') turned by
+        T_t' and gives the first candidate's depth orientation.
+    settings : CandidateSettings, optional
+    rng : numpy.random.Generator
+    prev : FrameCandidates, optional
+        The previous frame's candidates (extra initial estimates, 6.7).
+
+    Returns
+    -------
+    FrameCandidates
+
+    Raises
+    ------
+    InvalidInput
+        Shapes that do not match, an empty silhouette, non-finite postures, bad settings.
+    """
+    s = settings or CandidateSettings()
+    s.validate()
+    init = _check_inputs(target_silhouette, target_edges, camera, shape, initial_joints)
+    if not isinstance(rng, np.random.Generator):
+        raise InvalidInput("rng must be a numpy.random.Generator")
+    flags: list[str] = []
+    ref = init[0]
+    pool = init
+    if prev is not None and len(prev.candidates):
+        order = np.argsort(prev.cost)[: s.n_prev]
+        pool = np.concatenate([init, prev.candidates[order]])
+    offsets = _frame_offsets(ref, shape.offsets)
+    target = Target.from_masks(
+        target_silhouette, target_edges, sigma_px=s.edge_sigma_px, xi=s.edge_xi
+    )
+    scorer = _Scorer(target, shape, camera, ref, s)
+    d0 = scorer.full(pool)
+    orient_src = [ref]
+    if prev is not None and len(pool) > len(init):
+        prev_best = pool[len(init)]
+        if d0[0] > d0[len(init)] + s.far_margin:
+            flags.append("reference_far")  # thesis 6.7: start from the previous frame instead
+            orient_src = [prev_best, ref]
+        else:
+            orient_src = [ref, prev_best]
+
+    # initial samples: drawn from the initial postures weighted by their likelihood
+    R0 = part_rotations(pool, offsets)  # (M, 12, 3, 3)
+    w = np.exp(-s.beta * (d0 - d0.min()))
+    m_of = np.concatenate([np.arange(len(pool)), rng.choice(len(pool), s.n_samples, p=w / w.sum())])
+    m_of = m_of[: s.n_samples]
+    rot_std = np.radians(s.rot_std0_deg)
+    pos_std = s.pos_std0_m
+    context = pool[int(np.argmin(d0))]
+    scorer.set_pose(context)
+    parts: list[_bp.PartSamples] = []
+    for p in range(N_PARTS):
+        x = pool[m_of, PART_ROOT_JOINT[p]].copy()
+        R = R0[m_of, p]
+        k = len(pool)
+        R = np.concatenate([R[:k], _bp.random_rotations(rng, len(m_of) - k, rot_std) @ R[k:]])
+        x[k:] += rng.normal(0.0, pos_std, size=x[k:].shape)
+        lphi = -s.beta * scorer.part(p, _bp.fill_part(context, p, offsets, x, R))
+        parts.append(_bp.PartSamples(x, R, lphi, lphi - np.logaddexp.reduce(lphi)))
+
+    def connected() -> np.ndarray:
+        return _bp.assemble(offsets, parts, [q.best for q in parts])
+
+    history = [float(scorer.full(connected()[None])[0])]
+    sigma, log_a = s.sigma0_m, np.log(s.a0)
+    for _ in range(s.n_iterations):
+        sigma *= s.decrease  # step 1: harden the constraints
+        log_a /= s.decrease
+        rot_std = max(rot_std * s.decrease, np.radians(s.rot_std_min_deg))
+        pos_std = max(pos_std * s.decrease, s.pos_std_min_m)
+        context = connected()
+        scorer.set_pose(context)
+        new = []
+        for p in range(N_PARTS):  # step 2: sample; phi with the others at the last poses
+            x, R = _bp.resample(
+                offsets, parts, p, s.n_samples, rot_std, pos_std, s.attach_prob, rng
+            )
+            lphi = -s.beta * scorer.part(p, _bp.fill_part(context, p, offsets, x, R))
+            new.append(_bp.PartSamples(x, R, lphi, lphi.copy()))
+        _bp.step_messages(offsets, parts, new, sigma, log_a)  # steps 3-4
+        parts = new
+        history.append(float(scorer.full(connected()[None])[0]))
+
+    est = connected()
+    if s.refine_sweeps > 0:
+        est, _ = _refine(scorer, est, camera, s)
+
+    # thesis 6.5: totally occluded parts take the reference's pose
+    occl = _occluded_parts(scorer, est, s.occluded_visible_fraction)
+    if occl:
+        R_est = part_rotations(est, offsets)
+        R_ref = part_rotations(orient_src[0], offsets)
+        R_est[occl] = R_ref[occl]
+        est = forward_kinematics(offsets, est[0], R_est)
+        for p in occl:
+            flags.extend(f"occluded:{JOINTS[BONE_CHILD[b]]}" for b in PART_BONES[p])
+    cands = generate_candidates(est, orient_src, camera, s)
+    # Never worse than the start: the initial postures (the reference turned by T_t' and the
+    # previous frame's best) are candidates themselves when they respect the joint limits.
+    starts = [q for q in pool[: len(init) + min(1, len(pool) - len(init))] if limits_ok(q)]
+    if starts:
+        cands = _append_distinct(cands, np.stack(starts), s.n_candidates)
+    d_s = scorer.full(cands)
+    prior = s.prior_weight * d_B(cands, ref)
+    return FrameCandidates(cands, d_s, tuple(flags), np.asarray(history), prior)
+
+
+def estimate_candidates_chunk(
+    target_silhouettes: np.ndarray,
+    target_edges: np.ndarray,
+    camera: Camera,
+    shape: BodyShape,
+    initial_joints: np.ndarray,
+    *,
+    settings: CandidateSettings | None = None,
+    rng: np.random.Generator,
+    prev: FrameCandidates | None = None,
+    on_progress: Callable[[str, float], None] | None = None,
+) -> list[FrameCandidates]:
+    """Candidates of consecutive frames, each using the previous one's (thesis 4.6, 6.7).
+
+    Parameters
+    ----------
+    target_silhouettes, target_edges : ndarray of bool, shape (N, H, W)
+    camera : Camera
+    shape : BodyShape
+    initial_joints : ndarray, shape (N, 17, 3) or (N, M, 17, 3)
+    settings, rng, prev
+        As :func:`estimate_candidates`; ``prev`` is the frame before the chunk.
+    on_progress : callable (stage, fraction), optional
+
+    Returns
+    -------
+    list of FrameCandidates, length N
+    """
+    sils = np.asarray(target_silhouettes)
+    edges = np.asarray(target_edges)
+    init = np.asarray(initial_joints, float)
+    if sils.ndim != 3:
+        raise InvalidInput(f"target_silhouettes must have shape (N, H, W), got {sils.shape}")
+    if init.shape[0] != sils.shape[0]:
+        raise InvalidInput(
+            f"initial_joints must have one entry per frame ({sils.shape[0]}), got {init.shape[0]}"
+        )
+    out = []
+    for t in range(sils.shape[0]):
+        prev = estimate_candidates(
+            sils[t], edges[t], camera, shape, init[t], settings=settings, rng=rng, prev=prev
+        )
+        out.append(prev)
+        if on_progress is not None:
+            on_progress("candidates", (t + 1) / sils.shape[0])
+    return out
