@@ -23,6 +23,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--k", type=float, default=10.0, help="window factor k (w = kL/L')")
     p.add_argument("--band", type=float, default=0.25, help="band half-width beta/L")
     p.add_argument("--float-ends", type=int, default=0, help="let C(0), C(L') float (frames)")
+    p.add_argument("--max-frames", type=int, help="read at most this many video frames")
     p.set_defaults(func=run)
 
 
@@ -48,18 +49,20 @@ def plot_matrix(cost: np.ndarray, C: np.ndarray, path: Path) -> None:
 def run(args: argparse.Namespace) -> int:
     from engine.io.bvh import load_reference
     from engine.io.video import read_video
-    from engine.stages import AlignmentSettings, run_stages_0_2
+    from engine.stages import AlignmentSettings, run_stages_0_2_full
 
     t_all = time.perf_counter()
     t0 = time.perf_counter()
     ref = load_reference(args.reference)
     t_ref = time.perf_counter() - t0
     t0 = time.perf_counter()
-    video = read_video(args.video)
+    video = read_video(args.video) if args.max_frames is None else \
+        read_video(args.video, max_frames=args.max_frames)  # fmt: skip
     t_video = time.perf_counter() - t0
     settings = AlignmentSettings(k=args.k, band_fraction=args.band,
                                  float_start=args.float_ends, float_end=args.float_ends)  # fmt: skip
-    fg, camera, res, timing = run_stages_0_2(ref, video, alignment=settings)
+    st = run_stages_0_2_full(ref, video, alignment=settings)
+    fg, camera, res, timing = st.foreground, st.camera, st.alignment, st.timing_s
     timing = {"read_reference": t_ref, "read_video": t_video, **timing}
     timing["total"] = time.perf_counter() - t_all
     out = {
@@ -74,6 +77,7 @@ def run(args: argparse.Namespace) -> int:
             for t, (c, r, fl) in enumerate(zip(res.C, res.rotations, fg.flags, strict=True))
         ],
         "alignment": {"E_C": res.E_C, "one_to_one_relaxed": bool(res.relaxed)},
+        "body_width_factors": st.width_factors,
         "timing_s": {k: round(float(v), 4) for k, v in timing.items()},
     }  # fmt: skip
     args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -67,3 +67,25 @@ def test_validation():
         calibrate(np.zeros((17, 3)), shape, z, z)
     with pytest.raises(InvalidInput, match="at least 3|body region"):
         principal_axes(z)
+
+
+def test_fit_body_shape_recovers_wider_limbs():
+    from dataclasses import replace
+
+    from engine.body.kinematics import forward_kinematics
+    from engine.stages.calibration import fit_body_shape
+
+    shape = BodyShape.default(1.75)
+    eye = np.broadcast_to(np.eye(3), (12, 3, 3))
+    j = forward_kinematics(shape.offsets, np.array([0, 1.0, 0]), eye)
+    cam = Camera(scale=100.0, theta_z=0.0, cx=160, cy=200, width=320, height=240)
+    wide = replace(shape, radii=shape.radii * 1.3)
+    sil = capsules.silhouettes(j[None], wide, cam)[0]
+    fitted, f = fit_body_shape(j, shape, cam, sil)
+    assert f["arms"] == pytest.approx(1.3, abs=0.1) and f["legs"] == pytest.approx(1.3, abs=0.1)
+    m = capsules.silhouettes(j[None], fitted, cam)[0]
+    assert (m & sil).sum() / (m | sil).sum() > 0.95
+    with pytest.raises(InvalidInput, match="bounds"):
+        fit_body_shape(j, shape, cam, sil, bounds=(1.2, 2.0))
+    with pytest.raises(InvalidInput, match="silhouette must be"):
+        fit_body_shape(j, shape, cam, sil[:10])
