@@ -50,6 +50,9 @@ class BodyLimitMiddleware:
             f"{API_PREFIX}/analyses": settings.max_video_bytes + extra,
             f"{API_PREFIX}/references": settings.max_bvh_bytes + settings.max_domain_bytes + extra,
         }
+        # The browser pages' uploads (web.routes) carry the same files.
+        self.limits["/web/api/analyses"] = self.limits[f"{API_PREFIX}/analyses"]
+        self.limits["/web/api/references"] = self.limits[f"{API_PREFIX}/references"]
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http" or scope["method"] in ("GET", "HEAD", "OPTIONS"):

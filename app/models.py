@@ -144,3 +144,26 @@ class Analysis(Base):
 
     performer: Mapped[User] = relationship()
     reference: Mapped[Reference] = relationship()
+
+
+class Comment(Base):
+    """A coach's (or performer's) note on an analysis, pinned to a video frame or a segment."""
+
+    __tablename__ = "comments"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    club_id: Mapped[int] = mapped_column(ForeignKey("clubs.id", ondelete="CASCADE"), index=True)
+    analysis_id: Mapped[str] = mapped_column(
+        ForeignKey("analyses.id", ondelete="CASCADE"), index=True
+    )
+    author_id: Mapped[int | None] = mapped_column(
+        ForeignKey("users.id", ondelete="SET NULL"), default=None
+    )
+    #: Video frame t' the comment is pinned to, or None.
+    frame: Mapped[int | None] = mapped_column(Integer, default=None)
+    #: Segment index the comment is pinned to, or None.
+    segment: Mapped[int | None] = mapped_column(Integer, default=None)
+    body: Mapped[str] = mapped_column(Text)
+    created_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
+
+    author: Mapped[User | None] = relationship()

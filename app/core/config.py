@@ -25,6 +25,8 @@ class Settings(BaseSettings):
     #: "embedded" runs a local worker without Redis (``coach serve``); else a Celery broker URL.
     broker_url: str = "embedded"
     worker_concurrency: int = Field(default=1, ge=1, le=64)
+    #: Engine settings preset sent with every analysis ("fast" for demos and tests); "" = default.
+    engine_preset: str = ""
     #: Browser origins allowed by CORS; empty (the default) allows none.
     cors_origins: list[str] = []
 

@@ -164,6 +164,7 @@ async def create_analysis(
             video_path=str(video_path),
             work_dir=str(work_dir),
             domain_path=reference.domain_path,
+            settings={"preset": settings.engine_preset} if settings.engine_preset else {},
         )
         try:
             analysis.task_id = await run_in_threadpool(queue.enqueue, job)

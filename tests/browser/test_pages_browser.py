@@ -1,0 +1,241 @@
+"""The browser experience end to end: real app, real worker, Debian Chromium."""
+
+from __future__ import annotations
+
+import csv
+import io
+
+import numpy as np
+import pytest
+
+from tests.browser.conftest import COACH, sign_in
+
+pytestmark = pytest.mark.browser
+
+
+def canvas_colours(page, selector: str) -> tuple[int, int]:
+    """Counts of red-ish and green-ish pixels of a canvas (its own pixels, not the page)."""
+    data = page.evaluate(
+        """(sel) => { const c = document.querySelector(sel);
+             return Array.from(c.getContext('2d').getImageData(0, 0, c.width, c.height).data); }""",
+        selector,
+    )
+    rgba = np.asarray(data, np.int32).reshape(-1, 4)
+    seen = rgba[rgba[:, 3] > 200]
+    red = (seen[:, 0] > 180) & (seen[:, 1] < 110) & (seen[:, 2] < 80)
+    green = (seen[:, 1] > 180) & (seen[:, 0] < 150) & (seen[:, 2] < 80)
+    return int(red.sum()), int(green.sum())
+
+
+def most_colourful_frame(result: dict) -> int:
+    """The frame whose worst bone is worst (red) while another bone is near zero (green)."""
+    e = np.array([f["bone_errors_deg"] for f in result["frames"]])
+    return int(np.argmax(e.max(1) - e.min(1)))
+
+
+def go_to_frame(page, frame: int) -> None:
+    page.get_by_role("slider", name="Timeline: press left and right to move a frame").focus()
+    page.keyboard.press("Home")
+    for _ in range(frame):
+        page.keyboard.press("ArrowRight")
+    page.wait_for_function(f"document.getElementById('analysis').dataset.frame === '{frame}'")
+
+
+def wait_results(page, timeout_ms: float = 60_000) -> None:
+    page.wait_for_selector("#analysis[data-ready=true]", timeout=timeout_ms)
+    page.wait_for_function("document.getElementById('video').readyState >= 2", timeout=timeout_ms)
+
+
+def test_upload_through_the_page_runs_to_results(server, browser, clip, shots):
+    ctx = browser.new_context(viewport={"width": 1280, "height": 900})
+    page = ctx.new_page()
+    sign_in(page, server.url, "pat@example.com")
+    assert page.url.endswith("/upload")
+    page.wait_for_selector(".ref-option img")
+    page.wait_for_function(
+        "Array.from(document.querySelectorAll('.ref-option img'))"
+        ".every(i => i.complete && i.naturalWidth > 0)"
+    )
+    page.set_input_files("#video", str(clip))
+    page.screenshot(path=str(shots / "upload.png"), full_page=True)
+    page.get_by_role("button", name="Upload and analyse").click()
+    page.wait_for_url("**/analyses/*", timeout=30_000)
+    page.wait_for_function("document.getElementById('stage-bar').value > 0", timeout=60_000)
+    page.screenshot(path=str(shots / "progress.png"), full_page=True)
+    wait_results(page, timeout_ms=170_000)
+    assert page.locator("#progress-view").is_hidden()
+    assert page.locator("#stage-list li").count() >= 1  # stage names came over the stream
+    assert page.locator("#plot svg polyline").count() >= 1
+    ctx.close()
+
+
+def test_results_overlay_plot_and_cursor_follow_the_video(
+    server, browser, clip, clip_result, shots
+):
+    aid = server.add_done_analysis("pat", clip, clip_result)
+    ctx = browser.new_context(viewport={"width": 1280, "height": 1000})
+    page = ctx.new_page()
+    sign_in(page, server.url, "pat@example.com", next_path=f"/analyses/{aid}")
+    wait_results(page)
+    go_to_frame(page, most_colourful_frame(clip_result))
+    red, green = canvas_colours(page, "#overlay")
+    page.locator("#stage-box").screenshot(path=str(shots / "overlay.png"))
+    assert red > 10 and green > 10, (red, green)
+    assert page.locator("#plot-svg polyline").count() >= 2
+    assert page.locator(".seg-card").count() == len(clip_result["segments"])
+    page.wait_for_selector("#viewer3d:not([hidden]), #fallback3d:not([hidden])", timeout=30_000)
+    page.wait_for_timeout(1500)  # let the 3D view draw
+    page.screenshot(path=str(shots / "results.png"), full_page=True)
+    # Playback moves the timeline cursor (and the frame the 3D view shows).
+    go_to_frame(page, 0)
+    x0 = float(page.get_attribute("#plot-cursor", "x1"))
+    page.get_by_role("button", name="Play").click()
+    page.wait_for_function(
+        "+document.getElementById('analysis').dataset.frame >= 4", timeout=10_000
+    )
+    x1 = float(page.get_attribute("#plot-cursor", "x1"))
+    assert x1 > x0
+    t = page.evaluate("document.getElementById('video').currentTime")
+    frame = int(page.evaluate("document.getElementById('analysis').dataset.frame"))
+    assert abs(frame - t * clip_result["video"]["fps"]) <= 2
+    # Clicking a segment card seeks there.
+    page.evaluate("document.getElementById('video').pause()")
+    last = clip_result["segments"][-1]
+    page.locator(".seg-card").last.click()
+    page.wait_for_function(
+        f"document.getElementById('analysis').dataset.frame === '{last['performer_start']}'"
+    )
+    ctx.close()
+
+
+def test_coach_review_comments_persist_and_exports_parse(server, browser, clip, clip_result, shots):
+    aid = server.add_done_analysis("olive", clip, clip_result)
+    ctx = browser.new_context(viewport={"width": 1280, "height": 1000}, accept_downloads=True)
+    page = ctx.new_page()
+    sign_in(page, server.url, COACH[0], COACH[1], next_path=f"/analyses/{aid}/review")
+    wait_results(page)
+    page.locator("#next").click()
+    page.locator("#next").click()
+    page.get_by_label("New comment").fill("Keep the left arm straight here")
+    page.get_by_role("button", name="Add comment").click()
+    page.wait_for_function("document.querySelectorAll('#comments li.comment').length === 1")
+    page.get_by_label("New comment").fill("Too quick overall")
+    page.get_by_label("Pin to").select_option(
+        label=f"segment: {page.locator('.seg-card h3').first.inner_text()}"
+    )
+    page.get_by_role("button", name="Add comment").click()
+    page.wait_for_function("document.querySelectorAll('#comments li.comment').length === 2")
+    page.reload()
+    wait_results(page)
+    page.wait_for_function("document.querySelectorAll('#comments li.comment').length === 2")
+    texts = page.locator("#comments li.comment").all_inner_texts()
+    assert any("frame 2" in t and "left arm" in t for t in texts), texts
+    assert page.locator("#segment-table tbody tr").count() == len(clip_result["segments"])
+    page.screenshot(path=str(shots / "review.png"), full_page=True)
+
+    with page.expect_download() as d:
+        page.locator("#export-csv").click()
+    rows = list(csv.reader(io.StringIO(open(d.value.path()).read())))
+    assert len(rows) == 1 + len(clip_result["frames"])
+    assert float(rows[1][4]) == pytest.approx(
+        clip_result["frames"][0]["posture_error_deg"], abs=1e-3
+    )
+    with page.expect_download() as d:
+        page.locator("#export-bvh").click()
+    from engine.io.bvh import load_reference
+
+    motion = load_reference(d.value.path()).motion
+    assert motion.frames == len(clip_result["frames"])
+
+    page.goto(f"{server.url}/analyses/{aid}/report")
+    assert page.locator("svg.plot").count() == 1
+    assert "Keep the left arm straight" in page.content()
+    page.emulate_media(media="print")
+    page.screenshot(path=str(shots / "report.png"), full_page=True)
+    ctx.close()
+
+
+def test_two_viewers_each_see_their_own_analysis(server, browser, clip, clip_result):
+    other = dict(clip_result)
+    other["frames"] = [dict(f, bone_errors_deg=[0.0] * 16, posture_error_deg=0.0)
+                       for f in clip_result["frames"]]  # fmt: skip
+    a = server.add_done_analysis("pat", clip, clip_result)
+    b = server.add_done_analysis("olive", clip, other)
+    pages = []
+    for who, aid in (("pat", a), ("olive", b)):
+        ctx = browser.new_context(viewport={"width": 1100, "height": 900})
+        page = ctx.new_page()
+        sign_in(page, server.url, f"{who}@example.com", next_path=f"/analyses/{aid}")
+        pages.append((ctx, page, aid))
+    for _, page, _ in pages:
+        wait_results(page)
+        go_to_frame(page, most_colourful_frame(clip_result))
+    (_, pa, _), (_, pb, _) = pages
+    assert "Pat Putter" in pa.locator("h1").inner_text()
+    assert "Olive Iron" in pb.locator("h1").inner_text()
+    red_a, _ = canvas_colours(pa, "#overlay")
+    red_b, green_b = canvas_colours(pb, "#overlay")
+    assert red_a > 10 and red_b == 0 and green_b > 10
+    # Each 3D view is its own server (when viser is there; else both show the 2D fallback).
+    for _, p, _ in pages:
+        p.wait_for_selector("#viewer3d:not([hidden]), #fallback3d:not([hidden])", timeout=30_000)
+    urls = [p.get_attribute("#viewer3d", "src") for _, p, _ in pages]
+    if all(urls):
+        assert urls[0] != urls[1]
+    # Neither performer can open the other's analysis.
+    assert pa.goto(f"{server.url}/analyses/{b}").status == 404
+    for ctx, _, _ in pages:
+        ctx.close()
+
+
+def test_coach_dashboard_and_references(server, browser, clip, clip_result, shots, tmp_path):
+    server.add_done_analysis("pat", clip, clip_result)
+    ctx = browser.new_context(viewport={"width": 1280, "height": 900})
+    page = ctx.new_page()
+    sign_in(page, server.url, COACH[0], COACH[1])
+    assert page.url.endswith("/dashboard")
+    assert page.locator("#analyses-table tbody tr").count() >= 1
+    page.get_by_label("Performer").select_option(label="Olive Iron")
+    page.get_by_label("Status").select_option("done")
+    page.get_by_role("button", name="Filter").click()
+    page.wait_for_url("**performer=*")
+    for row in page.locator("#analyses-table tbody tr").all_inner_texts():
+        assert "Pat Putter" not in row
+    page.goto(f"{server.url}/dashboard")
+    page.screenshot(path=str(shots / "dashboard.png"), full_page=True)
+
+    page.goto(f"{server.url}/references")
+    page.wait_for_selector(".ref-card")
+    from tests.conftest import CMU
+
+    page.locator("#ref-upload").get_by_label("Name", exact=True).fill("Second swing")
+    page.get_by_label("BVH file").set_input_files(str(CMU / "64_29.bvh"))
+    page.get_by_role("button", name="Upload reference").click()
+    page.wait_for_function("document.querySelectorAll('.ref-card').length === 2", timeout=30_000)
+    card = page.locator(".ref-card").first
+    card.get_by_label("Segment names (one a line, in order)").fill("address\nbackswing\ndownswing")
+    card.get_by_text("Per-bone weights and tolerances").click()
+    card.get_by_label("l_knee->l_ankle tolerance in degrees").fill("15")
+    card.get_by_role("button", name="Save").click()
+    card.get_by_text("Saved.").wait_for()
+    page.wait_for_function("Array.from(document.images).every(i => i.complete)")
+    page.screenshot(path=str(shots / "references.png"), full_page=True)
+    page.reload()
+    page.wait_for_selector(".ref-card")
+    assert "backswing" in page.locator(".ref-card").first.locator("textarea").input_value()
+    ctx.close()
+
+
+def test_phone_layout_upload_page(server, browser, shots):
+    ctx = browser.new_context(
+        viewport={"width": 390, "height": 844}, is_mobile=True, has_touch=True
+    )
+    page = ctx.new_page()
+    sign_in(page, server.url, "pat@example.com")
+    page.wait_for_selector(".ref-option img")
+    assert page.locator("#video").get_attribute("accept") == "video/*"
+    assert page.locator("#video").get_attribute("capture") is not None
+    width = page.evaluate("document.documentElement.scrollWidth")
+    assert width <= 390, f"horizontal scroll on a phone: {width}px"
+    page.screenshot(path=str(shots / "upload-phone.png"), full_page=True)
+    ctx.close()

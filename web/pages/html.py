@@ -1,0 +1,179 @@
+"""The HTML pages. Data comes from the JSON endpoints in :mod:`web.pages.api` (fetched by the
+page scripts) or, for the dashboard and the printable report, is rendered here."""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime, time, timedelta
+from pathlib import Path
+from typing import Annotated, Any
+from urllib.parse import quote
+
+from fastapi import APIRouter, Query, Request
+from fastapi.responses import HTMLResponse, RedirectResponse
+from fastapi.templating import Jinja2Templates
+
+from app import crud
+from app.api.deps import NotifierDep, SessionDep
+from app.api.errors import ApiError
+from app.api.routes.analyses import summarise_segments
+from app.core.reflect import reflect
+from app.models import ANALYSIS_STATES, User
+from web.pages import api, media
+
+TEMPLATES = Jinja2Templates(directory=Path(__file__).resolve().parents[1] / "templates")
+router = APIRouter(include_in_schema=False)
+
+
+def page_user(request: Request, session) -> User | None:
+    uid = request.session.get("user_id")
+    return crud.get_user(session, uid) if isinstance(uid, int) else None
+
+
+def _sign_in(request: Request) -> RedirectResponse:
+    target = request.url.path + (f"?{request.url.query}" if request.url.query else "")
+    return RedirectResponse(f"/login?next={quote(target)}", status_code=303)
+
+
+def _render(request: Request, name: str, user: User | None, status: int = 200, **ctx: Any):
+    return TEMPLATES.TemplateResponse(
+        request, name, {"user": user, "page": name.removesuffix(".html")} | ctx,
+        status_code=status,
+    )  # fmt: skip
+
+
+def _forbidden(request: Request, user: User, message: str):
+    return _render(request, "message.html", user, 403, title="Not allowed", message=message)
+
+
+@router.get("/", response_class=HTMLResponse)
+def home(request: Request, session: SessionDep):
+    user = page_user(request, session)
+    if user is None:
+        return _sign_in(request)
+    return RedirectResponse("/dashboard" if user.role == "coach" else "/upload", status_code=303)
+
+
+@router.get("/login", response_class=HTMLResponse)
+def login(request: Request, session: SessionDep, next: str = "/"):
+    safe_next = next if next.startswith("/") and not next.startswith("//") else "/"
+    return _render(request, "login.html", page_user(request, session), next=safe_next)
+
+
+@router.get("/upload", response_class=HTMLResponse)
+def upload(request: Request, session: SessionDep):
+    user = page_user(request, session)
+    if user is None:
+        return _sign_in(request)
+    performers = (
+        crud.list_performers(session, club_id=user.club_id, limit=1000, offset=0)
+        if user.role == "coach" else []
+    )  # fmt: skip
+    return _render(request, "upload.html", user, performers=performers)
+
+
+@router.get("/analyses/{analysis_id}", response_class=HTMLResponse)
+def analysis_page(request: Request, analysis_id: str, session: SessionDep, notifier: NotifierDep):
+    return _analysis(request, analysis_id, session, notifier, review=False)
+
+
+@router.get("/analyses/{analysis_id}/review", response_class=HTMLResponse)
+def review_page(request: Request, analysis_id: str, session: SessionDep, notifier: NotifierDep):
+    return _analysis(request, analysis_id, session, notifier, review=True)
+
+
+def _analysis(request, analysis_id, session, notifier, *, review: bool):
+    user = page_user(request, session)
+    if user is None:
+        return _sign_in(request)
+    if review and user.role != "coach":
+        return _forbidden(request, user, "Only coaches review analyses.")
+    try:
+        a = api.get_analysis_for(session, user, analysis_id)
+    except ApiError:
+        return _render(request, "message.html", user, 404, title="Not found",
+                       message="There is no such analysis in your club.")  # fmt: skip
+    reflect(session, a, on_final=notifier)
+    return _render(request, "analysis.html", user, analysis=a, review=review)
+
+
+@router.get("/analyses/{analysis_id}/report", response_class=HTMLResponse)
+def report_page(request: Request, analysis_id: str, session: SessionDep, notifier: NotifierDep):
+    user = page_user(request, session)
+    if user is None:
+        return _sign_in(request)
+    try:
+        a = api.get_analysis_for(session, user, analysis_id)
+        result = api.load_result(session, a, notifier)
+    except ApiError as exc:
+        return _render(request, "message.html", user, exc.status_code, title="No report",
+                       message=exc.message)  # fmt: skip
+    segments = summarise_segments(result)
+    names = api.segment_names(a.reference, len(segments))
+    frames = result.get("frames") or []
+    comments = api.list_comment_rows(session, a)
+    return _render(
+        request, "report.html", user, analysis=a, result=result, frames=frames,
+        segments=list(zip(segments, names, strict=True)), comments=comments,
+        plot=media.error_plot_svg(result), fps=float(result["video"]["fps"]),
+        mean_error=(sum(f["posture_error_deg"] for f in frames) / len(frames)) if frames else 0.0,
+    )  # fmt: skip
+
+
+def _date(s: str | None, *, end: bool) -> datetime | None:
+    if not s:
+        return None
+    try:
+        d = datetime.strptime(s, "%Y-%m-%d").date()
+    except ValueError:
+        return None
+    t = datetime.combine(d, time.min, tzinfo=UTC)
+    return t + timedelta(days=1) if end else t
+
+
+@router.get("/dashboard", response_class=HTMLResponse)
+def dashboard(
+    request: Request,
+    session: SessionDep,
+    notifier: NotifierDep,
+    performer: Annotated[str, Query(max_length=12)] = "",
+    reference: Annotated[str, Query(max_length=12)] = "",
+    status: Annotated[str, Query(max_length=16)] = "",
+    since: Annotated[str, Query(max_length=10)] = "",
+    until: Annotated[str, Query(max_length=10)] = "",
+    offset: Annotated[int, Query(ge=0, le=1_000_000)] = 0,
+):
+    user = page_user(request, session)
+    if user is None:
+        return _sign_in(request)
+    if user.role != "coach":
+        return RedirectResponse("/upload", status_code=303)
+    limit = 50
+    items, total = crud.list_analyses(
+        session, club_id=user.club_id, limit=limit, offset=offset,
+        performer_id=int(performer) if performer.isdigit() else None,
+        reference_id=int(reference) if reference.isdigit() else None,
+        status=status if status in ANALYSIS_STATES else None,
+        created_after=_date(since, end=False), created_before=_date(until, end=True),
+    )  # fmt: skip
+    for a in items:
+        reflect(session, a, on_final=notifier)
+    performers = crud.list_performers(session, club_id=user.club_id, limit=1000, offset=0)
+    references = crud.list_references(session, club_id=user.club_id, limit=1000, offset=0)
+    query = {"performer": performer, "reference": reference, "status": status,
+             "since": since, "until": until}  # fmt: skip
+    return _render(
+        request, "dashboard.html", user, items=items, total=total, offset=offset, limit=limit,
+        performers=performers, references=references, states=ANALYSIS_STATES, query=query,
+    )  # fmt: skip
+
+
+@router.get("/references", response_class=HTMLResponse)
+def references_page(request: Request, session: SessionDep):
+    user = page_user(request, session)
+    if user is None:
+        return _sign_in(request)
+    if user.role != "coach":
+        return _forbidden(request, user, "Only coaches manage references.")
+    from engine.body.skeleton import BONE_NAMES
+
+    return _render(request, "references.html", user, bones=BONE_NAMES)

@@ -1,0 +1,345 @@
+// One analysis: live progress (SSE, polling fallback), then the results: video with the
+// skeleton overlay, the 3D view, one shared timeline (error plot + cursor), segment cards,
+// comments pinned to frames or segments.
+"use strict";
+(function () {
+  const root = document.getElementById("analysis");
+  const id = root.dataset.id;
+  const review = root.dataset.review === "true";
+  const base = "/web/api/analyses/" + id;
+  const $ = function (s) { return document.getElementById(s); };
+  const SVGNS = "http://www.w3.org/2000/svg";
+  const BONES = ["hip->l_hip", "l_hip->l_knee", "l_knee->l_ankle", "hip->r_hip", "r_hip->r_knee",
+    "r_knee->r_ankle", "hip->lower_chest", "lower_chest->upper_chest", "upper_chest->l_shoulder",
+    "l_shoulder->l_elbow", "l_elbow->l_wrist", "upper_chest->r_shoulder", "r_shoulder->r_elbow",
+    "r_elbow->r_wrist", "upper_chest->neck", "neck->head_top"];
+  const PARENT = [0, 1, 2, 0, 4, 5, 0, 7, 8, 9, 10, 8, 12, 13, 8, 15];
+  const CHILD = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16];
+  const PALETTE = ["#1971c2", "#9c36b5", "#e67700", "#0c8599", "#5f3dc4", "#d6336c", "#2f9e44", "#495057"];
+
+  // ---------------------------------------------------------------- progress
+  const seenStages = [];
+  function showProgress(a) {
+    root.dataset.status = a.status;
+    const pct = Math.round(100 * (a.progress || 0));
+    $("stage-name").textContent = a.stage || a.status;
+    $("stage-pct").textContent = pct + " %";
+    $("stage-bar").value = pct;
+    $("stage-message").textContent = a.message || "";
+    if (a.stage && seenStages.indexOf(a.stage) < 0) seenStages.push(a.stage);
+    const ol = $("stage-list");
+    ol.textContent = "";
+    seenStages.forEach(function (s) {
+      const done = a.status === "done" || s !== a.stage;
+      ol.append(coach.el("li", { class: done ? "done" : "current", text: (done ? "✓ " : "") + s }));
+    });
+    if (a.error) { $("analysis-error").textContent = a.error; $("analysis-error").hidden = false; }
+    $("cancel").hidden = !(a.status === "queued" || a.status === "running");
+  }
+  function finished(status) {
+    if (status === "done") { $("progress-view").hidden = true; loadResults(); }
+    else { $("stage-message").textContent = "The analysis " + status + "."; $("cancel").hidden = true; }
+  }
+  let polling = null;
+  function poll() {
+    if (polling) return;
+    polling = setInterval(async function () {
+      try {
+        const a = await coach.api(base);
+        showProgress(a);
+        if (["done", "failed", "cancelled"].indexOf(a.status) >= 0) { clearInterval(polling); finished(a.status); }
+      } catch (e) { /* keep polling through blips */ }
+    }, 2000);
+  }
+  function follow() {
+    if (!window.EventSource) { poll(); return; }
+    const es = new EventSource(base + "/events");
+    es.addEventListener("progress", function (ev) { showProgress(JSON.parse(ev.data)); });
+    es.addEventListener("end", function (ev) { es.close(); finished(JSON.parse(ev.data).status); });
+    es.onerror = function () { es.close(); poll(); };
+  }
+  $("cancel").addEventListener("click", async function () {
+    try { showProgress(await coach.api(base + "/cancel", { method: "POST" })); } catch (e) { $("stage-message").textContent = e.message; }
+  });
+
+  // ---------------------------------------------------------------- results
+  const video = $("video"), overlay = $("overlay");
+  let result = null, summary = null, frame = 0, fps = 30, n = 0, plot = null, viewerReady = false;
+
+  async function loadResults() {
+    $("results").hidden = false;
+    [result, summary] = await Promise.all([coach.api(base + "/result"), coach.api(base + "/summary")]);
+    fps = result.video.fps; n = result.frames.length;
+    overlay.width = result.video.width; overlay.height = result.video.height;
+    video.src = base + "/video.mp4";
+    buildBonePicks(); buildPlot(); buildSegments(); loadComments(); start3d();
+    $("plot").setAttribute("aria-valuemax", String(n - 1));
+    setFrame(0, true);
+    root.dataset.ready = "true";
+  }
+
+  function frameAtTime(t) { return Math.max(0, Math.min(n - 1, Math.floor(t * fps + 1e-3))); }
+  function seek(f) {
+    f = Math.max(0, Math.min(n - 1, f));
+    if (video.readyState > 0) video.currentTime = (f + 0.5) / fps;
+    setFrame(f, true);
+  }
+  function setFrame(f, force) {
+    if (f === frame && !force) return;
+    frame = f;
+    root.dataset.frame = String(f);
+    $("frame-label").textContent = "frame " + f + " / " + (n - 1) + " · " + (f / fps).toFixed(2) + " s";
+    drawOverlay(); moveCursor(); markSegment(); sync3d();
+  }
+  function tick() {
+    setFrame(frameAtTime(video.currentTime));
+    if (!video.paused && !video.ended) requestAnimationFrame(tick);
+  }
+  video.addEventListener("play", function () { $("play").textContent = "Pause"; requestAnimationFrame(tick); });
+  video.addEventListener("pause", function () { $("play").textContent = "Play"; tick(); });
+  video.addEventListener("ended", function () { $("play").textContent = "Play"; });
+  video.addEventListener("seeked", tick);
+  video.addEventListener("timeupdate", tick);
+  $("play").addEventListener("click", function () { if (video.paused) video.play(); else video.pause(); });
+  $("prev").addEventListener("click", function () { video.pause(); seek(frame - 1); });
+  $("next").addEventListener("click", function () { video.pause(); seek(frame + 1); });
+  $("show-skeleton").addEventListener("change", drawOverlay);
+
+  function drawOverlay() {
+    const ctx = overlay.getContext("2d");
+    ctx.clearRect(0, 0, overlay.width, overlay.height);
+    if (!result || !$("show-skeleton").checked) return;
+    const fr = result.frames[frame];
+    const p = fr.joints_2d, e = fr.bone_errors_deg;
+    const w = Math.max(2, overlay.height / 80);
+    ctx.lineCap = "round";
+    for (let b = 0; b < 16; b++) {
+      ctx.strokeStyle = "rgba(0,0,0,0.6)"; ctx.lineWidth = w + 2;
+      ctx.beginPath(); ctx.moveTo(p[PARENT[b]][0], p[PARENT[b]][1]); ctx.lineTo(p[CHILD[b]][0], p[CHILD[b]][1]); ctx.stroke();
+      ctx.strokeStyle = coach.errorColor(e[b]); ctx.lineWidth = w;
+      ctx.beginPath(); ctx.moveTo(p[PARENT[b]][0], p[PARENT[b]][1]); ctx.lineTo(p[CHILD[b]][0], p[CHILD[b]][1]); ctx.stroke();
+    }
+    ctx.fillStyle = "#fff";
+    p.forEach(function (q) { ctx.beginPath(); ctx.arc(q[0], q[1], w * 0.6, 0, 2 * Math.PI); ctx.fill(); });
+  }
+
+  // ---------------------------------------------------------------- timeline
+  function picked() {
+    return Array.from(document.querySelectorAll("#bone-picks input:checked")).map(function (i) { return +i.value; });
+  }
+  function buildBonePicks() {
+    const mean = BONES.map(function (_, b) {
+      return result.frames.reduce(function (s, f) { return s + f.bone_errors_deg[b]; }, 0) / n;
+    });
+    const worst = mean.map(function (m, b) { return [m, b]; }).sort(function (a, b) { return b[0] - a[0]; }).slice(0, 2).map(function (x) { return x[1]; });
+    const box = $("bone-picks");
+    BONES.forEach(function (name, b) {
+      const cb = coach.el("input", { type: "checkbox", value: b, id: "bone-" + b });
+      cb.checked = worst.indexOf(b) >= 0;
+      cb.addEventListener("change", buildPlot);
+      box.append(coach.el("label", { class: "inline", for: "bone-" + b }, [cb, document.createTextNode(name + " (mean " + mean[b].toFixed(0) + "°)")]));
+    });
+  }
+  function svg(tag, attrs) {
+    const e = document.createElementNS(SVGNS, tag);
+    for (const k in attrs) e.setAttribute(k, attrs[k]);
+    return e;
+  }
+  function buildPlot() {
+    const W = 1000, H = 200, L = 40, R = 8, T = 10, B = 24;
+    const bones = picked();
+    let top = 10;
+    result.frames.forEach(function (f) {
+      top = Math.max(top, f.posture_error_deg);
+      bones.forEach(function (b) { top = Math.max(top, f.bone_errors_deg[b]); });
+    });
+    top = Math.ceil(top * 1.1 / 10) * 10;
+    const x = function (i) { return L + (W - L - R) * i / Math.max(n - 1, 1); };
+    const y = function (v) { return T + (H - T - B) * (1 - v / top); };
+    const s = svg("svg", { viewBox: "0 0 " + W + " " + H, preserveAspectRatio: "none", id: "plot-svg" });
+    (summary.segments || []).forEach(function (seg, i) {
+      s.append(svg("rect", { x: x(seg.performer_start), y: T, width: Math.max(x(seg.performer_end) - x(seg.performer_start), 1), height: H - T - B, fill: i % 2 ? "#eef2fb" : "#f8f9fc" }));
+      const t = svg("text", { x: x(seg.performer_start) + 4, y: T + 12, "font-size": 11, fill: "#5c6675" });
+      t.textContent = seg.name; s.append(t);
+    });
+    for (let v = 0; v <= top; v += top / 4) {
+      s.append(svg("line", { x1: L, x2: W - R, y1: y(v), y2: y(v), stroke: "#e3e6ec" }));
+      const t = svg("text", { x: 4, y: y(v) + 4, "font-size": 11, fill: "#5c6675" }); t.textContent = Math.round(v) + "°"; s.append(t);
+    }
+    function line(vals, colour, width, name) {
+      const pts = vals.map(function (v, i) { return x(i).toFixed(1) + "," + y(v).toFixed(1); }).join(" ");
+      const pl = svg("polyline", { points: pts, fill: "none", stroke: colour, "stroke-width": width, "vector-effect": "non-scaling-stroke" });
+      const title = svg("title", {}); title.textContent = name; pl.append(title);
+      s.append(pl);
+    }
+    bones.forEach(function (b, k) { line(result.frames.map(function (f) { return f.bone_errors_deg[b]; }), PALETTE[k % PALETTE.length], 1.5, BONES[b]); });
+    line(result.frames.map(function (f) { return f.posture_error_deg; }), "#c92a2a", 3, "posture error");
+    const cursor = svg("line", { id: "plot-cursor", y1: T, y2: H - B, stroke: "#111", "stroke-width": 2, "vector-effect": "non-scaling-stroke" });
+    s.append(cursor);
+    const lt = svg("text", { x: L, y: H - 6, "font-size": 11, fill: "#5c6675" }); lt.textContent = "frame 0"; s.append(lt);
+    const rt = svg("text", { x: W - R - 70, y: H - 6, "font-size": 11, fill: "#5c6675" }); rt.textContent = "frame " + (n - 1); s.append(rt);
+    // Legend.
+    let lx = L + 200;
+    [["posture error", "#c92a2a"]].concat(bones.map(function (b, k) { return [BONES[b], PALETTE[k % PALETTE.length]]; })).forEach(function (it) {
+      s.append(svg("rect", { x: lx, y: H - 15, width: 14, height: 4, fill: it[1] }));
+      const t = svg("text", { x: lx + 18, y: H - 10, "font-size": 11, fill: "#333" }); t.textContent = it[0]; s.append(t);
+      lx += 30 + it[0].length * 6;
+    });
+    plot = { x: x, L: L, R: R, W: W };
+    $("plot").textContent = "";
+    $("plot").append(s);
+    moveCursor();
+  }
+  function moveCursor() {
+    const c = document.getElementById("plot-cursor");
+    if (!c || !plot) return;
+    c.setAttribute("x1", plot.x(frame)); c.setAttribute("x2", plot.x(frame));
+    $("plot").setAttribute("aria-valuenow", String(frame));
+    $("plot").setAttribute("aria-valuetext", "frame " + frame);
+  }
+  function plotFrame(ev) {
+    const r = $("plot").getBoundingClientRect();
+    const u = (ev.clientX - r.left) / r.width * plot.W;
+    return Math.round((u - plot.L) / (plot.W - plot.L - plot.R) * (n - 1));
+  }
+  let dragging = false;
+  $("plot").addEventListener("pointerdown", function (ev) { if (!plot) return; dragging = true; video.pause(); seek(plotFrame(ev)); });
+  $("plot").addEventListener("pointermove", function (ev) { if (dragging) seek(plotFrame(ev)); });
+  window.addEventListener("pointerup", function () { dragging = false; });
+  $("plot").addEventListener("keydown", function (ev) {
+    const step = { ArrowLeft: -1, ArrowRight: 1, PageDown: -10, PageUp: 10 }[ev.key];
+    if (step) { ev.preventDefault(); video.pause(); seek(frame + step); }
+    if (ev.key === "Home") { ev.preventDefault(); seek(0); }
+    if (ev.key === "End") { ev.preventDefault(); seek(n - 1); }
+  });
+
+  // ---------------------------------------------------------------- segments
+  function tempoText(r) {
+    if (!r) return "tempo: –";
+    if (Math.abs(r - 1) < 0.05) return "tempo: as the expert";
+    return "tempo: " + r.toFixed(2) + "× the expert's time (" + (r > 1 ? "slower" : "faster") + ")";
+  }
+  function buildSegments() {
+    const box = $("segment-cards");
+    box.textContent = "";
+    summary.segments.forEach(function (s, i) {
+      const card = coach.el("button", { type: "button", class: "seg-card", "data-index": i,
+        "aria-label": s.name + ": mean error " + s.mean_error_deg.toFixed(0) + " degrees; go to its first frame" }, [
+        coach.el("h3", { text: s.name }),
+        coach.el("span", { class: "score", text: (s.score != null ? s.score : s.mean_error_deg).toFixed(0) + "°" }),
+        coach.el("span", { class: "muted", text: "frames " + s.performer_start + "–" + s.performer_end }),
+        coach.el("span", { text: tempoText(s.tempo_ratio) }),
+        coach.el("ul", {}, s.worst_bones.map(function (wb) { return coach.el("li", { text: wb[0] + ": " + wb[1].toFixed(0) + "°" }); })),
+      ]);
+      card.style.borderLeftColor = coach.errorColor(s.mean_error_deg);
+      card.addEventListener("click", function () { video.pause(); seek(s.performer_start); });
+      box.append(card);
+    });
+    const pin = $("comment-pin");
+    summary.segments.forEach(function (s, i) { pin.append(coach.el("option", { value: "segment:" + i, text: "segment: " + s.name })); });
+    if (review) {
+      const tb = document.querySelector("#segment-table tbody");
+      summary.segments.forEach(function (s) {
+        const tr = coach.el("tr", {}, [
+          coach.el("th", { scope: "row", text: s.name }),
+          coach.el("td", { text: s.performer_start + "–" + s.performer_end }),
+          coach.el("td", { text: s.reference_start + "–" + s.reference_end }),
+          coach.el("td", { text: s.tempo_ratio ? s.tempo_ratio.toFixed(2) + "×" : "–" }),
+          coach.el("td", { text: s.mean_error_deg.toFixed(1) + "°" }),
+          coach.el("td", { text: s.worst_bones.map(function (wb) { return wb[0] + " " + wb[1].toFixed(0) + "°"; }).join(", ") }),
+        ]);
+        tb.append(tr);
+      });
+    }
+  }
+  function markSegment() {
+    if (!summary) return;
+    document.querySelectorAll(".seg-card").forEach(function (c) {
+      const s = summary.segments[+c.dataset.index];
+      c.classList.toggle("current", frame >= s.performer_start && frame <= s.performer_end);
+    });
+  }
+
+  // ---------------------------------------------------------------- comments
+  async function loadComments() {
+    const items = await coach.api(base + "/comments");
+    const ul = $("comments");
+    ul.textContent = "";
+    if (!items.length) ul.append(coach.el("li", { class: "muted", text: "No comments yet." }));
+    items.forEach(function (c) {
+      let pin;
+      if (c.frame != null) pin = coach.el("button", { type: "button", class: "link pin", text: "frame " + c.frame, onclick: function () { video.pause(); seek(c.frame); } });
+      else if (c.segment != null && summary.segments[c.segment]) pin = coach.el("button", { type: "button", class: "link pin", text: summary.segments[c.segment].name, onclick: function () { video.pause(); seek(summary.segments[c.segment].performer_start); } });
+      else pin = coach.el("span", { class: "pin", text: "general" });
+      const del = coach.el("button", { type: "button", class: "link", text: "Delete", "aria-label": "Delete comment", onclick: async function () {
+        await coach.api(base + "/comments/" + c.id, { method: "DELETE" }); loadComments(); } });
+      ul.append(coach.el("li", { class: "comment" }, [pin, coach.el("span", { class: "body", text: c.body }),
+        coach.el("span", { class: "meta", text: c.author + ", " + c.created_at.slice(0, 16).replace("T", " ") }), del]));
+    });
+  }
+  $("comment-form").addEventListener("submit", async function (ev) {
+    ev.preventDefault();
+    const body = $("comment-body").value.trim();
+    if (!body) return;
+    const pin = $("comment-pin").value;
+    const data = { body: body };
+    if (pin === "frame") data.frame = frame;
+    else if (pin.startsWith("segment:")) data.segment = +pin.split(":")[1];
+    const button = this.querySelector("button[type=submit]");
+    button.disabled = true;
+    try {
+      await coach.api(base + "/comments", { method: "POST", json: data });
+      $("comment-body").value = "";
+      await loadComments();
+    } finally { button.disabled = false; }
+  });
+
+  // ---------------------------------------------------------------- 3D view
+  async function start3d() {
+    try {
+      const v = await coach.api(base + "/viewer", { method: "POST" });
+      const frameEl = $("viewer3d");
+      frameEl.src = v.url;
+      frameEl.hidden = false;
+      $("viewer-status").textContent = "3D view: drag to orbit, scroll to zoom. It follows the timeline.";
+      viewerReady = true;
+      sync3d();
+    } catch (e) {
+      $("viewer-status").textContent = e.message;
+      $("fallback3d").hidden = false;
+      draw3dFallback();
+    }
+  }
+  let syncTimer = null, synced = -1;
+  function sync3d() {
+    if (!viewerReady) { draw3dFallback(); return; }
+    if (syncTimer) return;
+    syncTimer = setTimeout(function () {
+      syncTimer = null;
+      if (synced === frame) return;
+      synced = frame;
+      coach.api(base + "/viewer/frame", { method: "POST", json: { frame: frame } }).catch(function () {});
+    }, 120);
+  }
+  function draw3dFallback() {
+    const c = $("fallback-canvas");
+    if ($("fallback3d").hidden || !result) return;
+    const ctx = c.getContext("2d");
+    ctx.clearRect(0, 0, c.width, c.height);
+    const j = result.frames[frame].joints_3d, e = result.frames[frame].bone_errors_deg;
+    const hip = j[0], s = c.height / 2.4;
+    ctx.lineWidth = 5; ctx.lineCap = "round";
+    for (let b = 0; b < 16; b++) {
+      const p = j[PARENT[b]], q = j[CHILD[b]];
+      ctx.strokeStyle = coach.errorColor(e[b]);
+      ctx.beginPath();
+      ctx.moveTo(c.width / 2 - (p[0] - hip[0]) * s, c.height * 0.55 - (p[1] - hip[1]) * s);
+      ctx.lineTo(c.width / 2 - (q[0] - hip[0]) * s, c.height * 0.55 - (q[1] - hip[1]) * s);
+      ctx.stroke();
+    }
+  }
+
+  // ---------------------------------------------------------------- start
+  if (root.dataset.status === "done") loadResults();
+  else if (root.dataset.status === "queued" || root.dataset.status === "running") follow();
+})();
