@@ -19,7 +19,7 @@ system:
 setup: system $(STAMP)
 
 demo: setup
-	$(VENV)/bin/coach demo
+	$(VENV)/bin/coach serve
 
 test: setup
 	PYOPENGL_PLATFORM=egl $(PY) -m pytest -q -p no:cacheprovider

@@ -60,10 +60,13 @@ def seed(session, settings, storage, *, out=print) -> None:
         if settings.is_development:
             out(f"coach: demo coach login: coach@example.com / {password}")
     if crud.get_user_by_email(session, club_id=club.id, email="performer@example.com") is None:
+        password = "performer-demo-password" if settings.is_development else None
         crud.create_user(
             session, club_id=club.id, role="performer", email="performer@example.com",
-            display_name="Demo performer",
+            display_name="Demo performer", password=password,
         )  # fmt: skip
+        if password:
+            out(f"coach: demo performer login: performer@example.com / {password}")
     if crud.get_reference_by_name(session, club_id=club.id, name="CMU 64_29 (golf swing)") is None:
         if not DEMO_BVH.is_file():
             log.warning("seed.reference_skipped missing=%s", DEMO_BVH)
@@ -85,6 +88,86 @@ def seed(session, settings, storage, *, out=print) -> None:
                 crud.revoke_api_key(session, row)
         _, key = crud.create_api_key(session, club_id=club.id, name=DEV_KEY_NAME)
         out(f"coach: development API key for {DEMO_CLUB!r}: {key}")
+
+
+DEMO_ANALYSIS_KEY = "demo-analysis"
+
+
+def seed_demo_analysis(session, settings, storage, queue, *, out=print) -> None:
+    """Queue one analysis of a synthetic performer against the demo reference (first run only).
+
+    The video is made by the engine's own generator (engine.synth: a time-warped 64_29 with
+    articulation errors in one segment), so the demo shows a real analysis with no upload.
+    """
+    import uuid
+
+    import numpy as np
+
+    from app import crud
+    from app.core.queue import analysis_job
+    from app.models import Analysis
+
+    club = crud.get_club_by_name(session, DEMO_CLUB)
+    ref = club and crud.get_reference_by_name(
+        session, club_id=club.id, name="CMU 64_29 (golf swing)"
+    )
+    performer = club and crud.get_user_by_email(
+        session, club_id=club.id, email="performer@example.com"
+    )
+    if ref is None or performer is None or not ref.bvh_path:
+        return
+    if crud.get_analysis_by_idempotency_key(session, club_id=club.id, key=DEMO_ANALYSIS_KEY):
+        return
+    from engine.io.bvh import load_reference
+    from engine.io.encode import write_video
+    from engine.synth import SynthSettings, synthesize
+
+    analysis_id = str(uuid.uuid4())
+    work_dir = storage.analysis_dir(analysis_id)
+    work_dir.mkdir(parents=True, exist_ok=True)
+    out("coach: making the demo video (synthetic performer, about 10 s)...")
+    case = synthesize(
+        load_reference(ref.bvh_path),
+        settings=SynthSettings(fps=15.0, n_wrong=1, error_deg=25.0, noise_sigma=2.0),
+        rng=np.random.default_rng(7),
+    )
+    video_path = work_dir / "video.mp4"
+    write_video(video_path, case.frames, case.fps)
+    analysis = Analysis(
+        id=analysis_id, club_id=club.id, performer_id=performer.id, reference_id=ref.id,
+        video_path=str(video_path), work_dir=str(work_dir), status="queued",
+        message=f"queued ({len(case.frames)} frames at {case.fps:.1f} fps)",
+        idempotency_key=DEMO_ANALYSIS_KEY,
+    )  # fmt: skip
+    session.add(analysis)
+    session.commit()
+    analysis.task_id = queue.enqueue(analysis_job(analysis, ref, settings.engine_preset))
+    session.commit()
+    out(f"coach: demo analysis queued: /analyses/{analysis_id}")
+
+
+def resume_unfinished(session, settings, queue, *, out=print) -> int:
+    """Re-queue analyses left queued or running when the last server stopped.
+
+    The embedded transport loses a message whose worker was killed, so its queue is purged
+    and rebuilt from the database; each analysis resumes from its last finished stage (the
+    worker skips stages whose output exists).
+    """
+    from app import crud
+    from app.core.queue import analysis_job, purge_embedded_queue
+    from app.models import Reference
+
+    purge_embedded_queue()
+    rows = crud.list_active_analyses(session)
+    for analysis in rows:
+        reference = session.get(Reference, analysis.reference_id)
+        if reference is None:
+            continue
+        analysis.task_id = queue.enqueue(analysis_job(analysis, reference, settings.engine_preset))
+        session.commit()
+    if rows:
+        out(f"coach: resumed {len(rows)} unfinished analyses")
+    return len(rows)
 
 
 def run_serve(args: argparse.Namespace) -> int:
@@ -112,10 +195,17 @@ def run_serve(args: argparse.Namespace) -> int:
         except ImportError:
             embedded = None
         if embedded is not None and hasattr(embedded, "start"):
+            from app.core.queue import get_queue
+
+            with app.state.sessionmaker() as session:
+                resume_unfinished(session, settings, get_queue())
+                if not args.no_seed:
+                    seed_demo_analysis(session, settings, app.state.storage, get_queue())
             embedded.start(settings.data_dir.resolve(), settings.worker_concurrency)
         else:
             embedded = None
             log.warning("serve.no_embedded_worker: analyses stay queued until a worker runs")
+    print(f"coach: open http://{args.host}:{args.port}/ (Ctrl+C to stop)", flush=True)
     try:
         uvicorn.run(app, host=args.host, port=args.port, log_level="info")
     finally:

@@ -46,6 +46,32 @@ class CeleryQueue:
             raise QueueUnavailable(f"could not revoke task {task_id}: {exc}") from exc
 
 
+def analysis_job(analysis, reference, engine_preset: str = "") -> AnalysisJob:
+    """The worker payload of an analysis row (paths and settings only)."""
+    return AnalysisJob(
+        analysis_id=analysis.id,
+        reference_path=reference.bvh_path,
+        video_path=analysis.video_path,
+        work_dir=analysis.work_dir,
+        domain_path=reference.domain_path,
+        settings={"preset": engine_preset} if engine_preset else {},
+    )
+
+
+def purge_embedded_queue() -> int:
+    """Drop every message of the embedded (filesystem) broker; returns how many.
+
+    Used at start-up of the embedded deployment, whose transport cannot give a message back
+    when its worker is killed: the queue is rebuilt from the database instead.
+    """
+    try:
+        from worker.celery_app import app, current_settings
+    except ImportError:
+        return 0
+    current_settings()
+    return int(app.control.purge() or 0)
+
+
 _queue = CeleryQueue()
 
 

@@ -24,7 +24,7 @@ from app.api.deps import (
 )
 from app.api.errors import ApiError, errors, not_found
 from app.core import validation
-from app.core.queue import QueueUnavailable
+from app.core.queue import QueueUnavailable, analysis_job
 from app.core.reflect import reflect
 from app.core.storage import Storage, UploadTooLarge
 from app.models import TERMINAL_STATES, Analysis, Club
@@ -36,7 +36,6 @@ from app.schemas import (
     SegmentsPublic,
 )
 from engine.errors import InvalidInput
-from worker.contract import AnalysisJob
 
 log = logging.getLogger("app.analyses")
 
@@ -158,14 +157,7 @@ async def create_analysis(
                 raise
             response.status_code = 200
             return existing
-        job = AnalysisJob(
-            analysis_id=analysis_id,
-            reference_path=reference.bvh_path,
-            video_path=str(video_path),
-            work_dir=str(work_dir),
-            domain_path=reference.domain_path,
-            settings={"preset": settings.engine_preset} if settings.engine_preset else {},
-        )
+        job = analysis_job(analysis, reference, settings.engine_preset)
         try:
             analysis.task_id = await run_in_threadpool(queue.enqueue, job)
         except QueueUnavailable as exc:
