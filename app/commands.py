@@ -146,7 +146,7 @@ def seed_demo_analysis(session, settings, storage, queue, *, out=print) -> None:
     out(f"coach: demo analysis queued: /analyses/{analysis_id}")
 
 
-def resume_unfinished(session, settings, queue, *, out=print) -> int:
+def resume_unfinished(session, settings, queue, *, purge=None, out=print) -> int:
     """Re-queue analyses left queued or running when the last server stopped.
 
     The embedded transport loses a message whose worker was killed, so its queue is purged
@@ -157,7 +157,7 @@ def resume_unfinished(session, settings, queue, *, out=print) -> int:
     from app.core.queue import analysis_job, purge_embedded_queue
     from app.models import Reference
 
-    purge_embedded_queue()
+    (purge or purge_embedded_queue)()
     rows = crud.list_active_analyses(session)
     for analysis in rows:
         reference = session.get(Reference, analysis.reference_id)
