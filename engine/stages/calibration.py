@@ -163,7 +163,11 @@ def pca_camera(
 
 
 def _refine(
-    joints: np.ndarray, shape: BodyShape, target: capsules.Target, cam: Camera, s: CalibrationSettings
+    joints: np.ndarray,
+    shape: BodyShape,
+    target: capsules.Target,
+    cam: Camera,
+    s: CalibrationSettings,
 ) -> tuple[Camera, float]:
     """Coordinate search on scale and position minimising d_S (a few dozen renders)."""
 

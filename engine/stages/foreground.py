@@ -6,13 +6,18 @@ static-camera background estimate (seed 001 3.1.2: "the regions of the video fra
 change") is a sturdier seed than a two-frame difference, which vanishes whenever the performer
 pauses. Here:
 
-1. Background (:func:`estimate_background`): per-pixel temporal median over sampled frames,
-   then a second median over only the frames where the pixel was *not* foreground, so a
-   performer who stands still for a while (less than the whole video) does not print into the
-   background; pixels never uncovered are inpainted (and flagged).
-2. Difference and threshold (seed 001 3.1.3), morphological clean-up, small blobs dropped.
-3. GrabCut (4.1.1, ``cv2.grabCut``) seeded from that mask, run only on the body's bounding
-   box plus a margin (the thesis used a fixed 2h/3 x h window).
+1. Background (:func:`estimate_background`): per-pixel temporal median in CIE L*a*b* over
+   sampled frames, then a second median over only the frames where the pixel was *not*
+   foreground (GrabCut bodies included), so a performer who stands still for a while does
+   not print into the background; a per-pixel noise scale; pixels seen free in too few
+   frames are "never seen" and get a local model instead: the colours of the nearest
+   known background pixels along their rows.
+2. Difference (:func:`segment_frame`, seed 001 3.1.3): weighted L*a*b* distance over a
+   per-pixel threshold gives a trimap (sure foreground, ambiguous, sure background);
+   morphological clean-up, small blobs dropped, holes filled only when no pixel of the hole
+   is clearly background (the gap between the legs stays open).
+3. GrabCut (4.1.1, ``cv2.grabCut``) seeded with that trimap instead of a box, run only on
+   frames with ambiguous pixels near the body and only on their bounding box.
 4. Skin (4.1.2): the explicit YCrCb skin-colour box of Chai and Ngan (1999),
    ``133 <= Cr <= 173`` and ``77 <= Cb <= 127``, in place of the GMM of Jones and Rehg [JR02]
    whose 32 Gaussians the thesis copies; kept only inside the (dilated) body region.
@@ -48,8 +53,18 @@ class ForegroundSettings:
     background_samples : int
         Frames sampled (evenly) for the background median.
     threshold : float
-        Colour difference (max over RGB channels, 0-255) above which a pixel is foreground
-        (seed 001 3.1.3 "specified threshold").
+        Colour distance (weighted CIE L*a*b*, lightness at half weight so that shadows
+        count less) above which a pixel is foreground (seed 001 3.1.3 "specified
+        threshold"); the threshold of a noisy pixel is raised to ``noise_factor`` times its
+        noise scale. Twice the threshold is sure foreground, half of it sure background.
+    noise_factor : float
+        Per-pixel threshold in units of the background's noise scale
+        (:attr:`Background.noise`).
+    never_factor : float
+        Threshold of never-seen pixels (compared with nearby background colours,
+        :attr:`Background.never_samples`) in units of ``threshold``.
+    min_free_fraction : float
+        See :func:`estimate_background`.
     blur_sigma_px : float
         Gaussian blur before differencing (video noise).
     min_blob_fraction : float
@@ -61,7 +76,10 @@ class ForegroundSettings:
     grabcut_iterations : int
         GrabCut iterations (steps 4-7 of 4.1.1 repeated).
     grabcut_margin_px : int
-        Margin around the body's bounding box given to GrabCut as probable background.
+        Margin around the ambiguous pixels' bounding box given to GrabCut.
+    min_ambiguous_px : int
+        GrabCut runs only on frames with at least this many ambiguous pixels near the body
+        (between the sure thresholds, or never seen as background).
     skin : bool
         Detect skin regions (thesis 4.1.2).
     moving_camera_fraction : float
@@ -70,13 +88,17 @@ class ForegroundSettings:
     """
 
     background_samples: int = 30
-    threshold: float = 28.0
+    threshold: float = 8.0
+    noise_factor: float = 4.0
+    never_factor: float = 1.0
+    min_free_fraction: float = 0.3
     blur_sigma_px: float = 1.0
     min_blob_fraction: float = 0.15
     min_person_fraction: float = 0.005
     grabcut: bool = True
     grabcut_iterations: int = 2
-    grabcut_margin_px: int = 12
+    grabcut_margin_px: int = 6
+    min_ambiguous_px: int = 30
     skin: bool = True
     moving_camera_fraction: float = 0.25
 
@@ -115,23 +137,65 @@ def _blur(img: np.ndarray, sigma: float) -> np.ndarray:
     return cv2.GaussianBlur(img, (0, 0), sigma) if sigma > 0 else img
 
 
-def _difference(frames: np.ndarray, background: np.ndarray, sigma: float) -> np.ndarray:
-    """Max-over-channels absolute difference, (N, H, W, 3) -> (N, H, W) float32."""
-    bg = _blur(background, sigma).astype(np.int16)
-    out = np.empty(frames.shape[:3], dtype=np.float32)
+#: Weights of (L*, a*, b*) in the colour distance: a cast shadow or a shading change alters
+#: lightness far more than chroma, so lightness counts half.
+_LAB_WEIGHTS = np.array([0.8, 1.0, 1.0], np.float32)
+
+
+def _lab(frames: np.ndarray, sigma: float) -> np.ndarray:
+    """Blurred CIE L*a*b* (float32, L in 0-100), (N, H, W, 3) uint8 RGB -> (N, H, W, 3)."""
+    out = np.empty(frames.shape, np.float32)
     for i, f in enumerate(frames):
-        out[i] = np.abs(_blur(f, sigma).astype(np.int16) - bg).max(-1)
+        out[i] = cv2.cvtColor(_blur(f, sigma).astype(np.float32) * (1 / 255), cv2.COLOR_RGB2Lab)
     return out
+
+
+def _distance(lab: np.ndarray, bg_lab: np.ndarray) -> np.ndarray:
+    """Weighted L*a*b* distance to the background, (..., H, W, 3) -> (..., H, W) float32."""
+    d = (lab - bg_lab) * _LAB_WEIGHTS
+    return np.sqrt(np.einsum("...c,...c->...", d, d))
+
+
+@dataclass(frozen=True)
+class Background:
+    """Static-camera background model (seed 001 3.1.2).
+
+    Attributes
+    ----------
+    image : ndarray of uint8, shape (H, W, 3)
+        Background colour (RGB); inpainted where never seen.
+    lab : ndarray of float32, shape (H, W, 3)
+        The same in blurred L*a*b*.
+    noise : ndarray of float32, shape (H, W)
+        Per-pixel scale of the colour distance between a frame and the background over the
+        frames where the pixel showed background (the median distance: compression noise is
+        larger on textured and edge pixels).
+    never : ndarray of bool, shape (H, W)
+        Pixels never seen free of the performer; their colour is a guess and they are left
+        compared with ``never_samples`` instead.
+    never_samples : ndarray of float32, shape (N, K, 3)
+        For each never-seen pixel (row-major order of ``never``), L*a*b* colours of K known
+        background pixels nearest to it along its row and the rows 2 px above and below: a
+        local, non-parametric background model (a textured wall has several colours, and
+        only the nearest ones say which).
+    """
+
+    image: np.ndarray
+    lab: np.ndarray
+    noise: np.ndarray
+    never: np.ndarray
+    never_samples: np.ndarray
 
 
 def estimate_background(
     frames: np.ndarray,
     *,
     samples: int = 30,
-    threshold: float = 28.0,
+    threshold: float = 8.0,
     blur_sigma_px: float = 1.0,
     body_frames: int = 30,
-) -> tuple[np.ndarray, np.ndarray]:
+    min_free_fraction: float = 0.1,
+) -> Background:
     """Background of a static camera (seed 001 3.1.2: the regions that do not change).
 
     1. A temporal median over ``samples`` evenly spaced frames.
@@ -142,6 +206,7 @@ def estimate_background(
     3. A second median over only the frames where each pixel is neither different from the
        first estimate nor inside a body found in step 2; pixels never seen free are
        inpainted (cv2.INPAINT_TELEA) and reported.
+    4. The per-pixel noise scale: the median colour distance over the frames used in 3.
 
     Parameters
     ----------
@@ -152,20 +217,22 @@ def estimate_background(
         As :class:`ForegroundSettings`.
     body_frames : int
         Frames segmented with GrabCut in step 2 (0 skips the step).
+    min_free_fraction : float
+        A pixel seen free in fewer than this fraction of the samples (and at least 3)
+        counts as never seen.
 
     Returns
     -------
-    background : ndarray of uint8, shape (H, W, 3)
-    never_seen : ndarray of bool, shape (H, W)
-        Pixels never observed as background (inpainted).
+    Background
     """
     import warnings
 
     idx = np.unique(np.linspace(0, len(frames) - 1, min(samples, len(frames))).round().astype(int))
     sample = frames[idx]
-    bg0 = np.median(sample, axis=0).astype(np.uint8)
-    diff = _difference(sample, bg0, blur_sigma_px)
-    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (7, 7))
+    lab = _lab(sample, blur_sigma_px)
+    bg0 = np.median(lab, axis=0)
+    diff = _distance(lab, bg0)
+    kernel = np.ones((3, 3), np.uint8)
     fg = np.stack([cv2.dilate((d > threshold).astype(np.uint8), kernel) for d in diff]) > 0
     if body_frames > 0:
         for j in np.unique(np.linspace(0, len(idx) - 1, body_frames).round().astype(int)):
@@ -173,16 +240,51 @@ def estimate_background(
             if coarse.any():
                 body = _grabcut_full_height(sample[j], coarse, diff[j] > 2 * threshold)
                 fg[j] |= cv2.dilate(body.astype(np.uint8), kernel) > 0
-    data = sample.astype(np.float32)
-    data[fg] = np.nan
+    lab[fg] = np.nan
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        bg = np.nanmedian(data, axis=0)
-    never = np.isnan(bg[..., 0])
-    bg = np.where(np.isnan(bg), bg0, bg).astype(np.uint8)
+        bg_lab = np.nanmedian(lab, axis=0)
+        noise = np.nanmedian(_distance(lab, bg_lab), axis=0)
+    # a pixel seen free only once or twice is more likely a body part GrabCut missed
+    never = (~fg).sum(0) < max(3, min_free_fraction * len(idx))
+    never = cv2.dilate(never.astype(np.uint8), kernel) > 0
+    bg_lab = np.where(never[..., None], bg0, bg_lab).astype(np.float32)
+    image = _lab_to_rgb(bg_lab)
     if never.any():
-        bg = cv2.inpaint(bg, never.astype(np.uint8), 5, cv2.INPAINT_TELEA)
-    return bg, never
+        image = cv2.inpaint(image, never.astype(np.uint8), 5, cv2.INPAINT_TELEA)
+        bg_lab = cv2.cvtColor(image.astype(np.float32) * (1 / 255), cv2.COLOR_RGB2Lab)
+    known = noise[~never]
+    floor = float(np.median(known)) if known.size else 1.0
+    noise = np.where(never | ~np.isfinite(noise), np.inf, np.maximum(noise, floor))
+    return Background(image, bg_lab, noise.astype(np.float32), never,
+                      _row_samples(bg_lab, never))  # fmt: skip
+
+
+def _row_samples(bg_lab: np.ndarray, never: np.ndarray, per_side: int = 8) -> np.ndarray:
+    """Known background colours nearest each never-seen pixel along rows r-2, r, r+2."""
+    h, w = never.shape
+    rows, cols = np.nonzero(never)
+    k = 2 * per_side * 3
+    out = np.zeros((rows.size, k, 3), np.float32)
+    known_cols = [np.flatnonzero(~never[r]) for r in range(h)]
+    for i, (r, c) in enumerate(zip(rows, cols, strict=True)):
+        picked = []
+        for rr in (r - 2, r, r + 2):
+            kc = known_cols[min(max(rr, 0), h - 1)]
+            pos = int(np.searchsorted(kc, c))
+            sel = np.concatenate([kc[max(pos - per_side, 0) : pos], kc[pos : pos + per_side]])
+            picked.append(bg_lab[min(max(rr, 0), h - 1), sel])
+        col = np.concatenate(picked)
+        if col.size:
+            out[i] = np.resize(col, (k, 3))
+        else:  # a whole band never seen: nothing better than the inpainted colour
+            out[i] = bg_lab[r, c]
+    return out
+
+
+def _lab_to_rgb(lab: np.ndarray) -> np.ndarray:
+    rgb = cv2.cvtColor(np.ascontiguousarray(lab, np.float32), cv2.COLOR_Lab2RGB)
+    return np.clip(rgb * 255 + 0.5, 0, 255).astype(np.uint8)
 
 
 def _grabcut_full_height(
@@ -214,8 +316,10 @@ def _grabcut_full_height(
     return cv2.resize(m, (w, h), interpolation=cv2.INTER_NEAREST) > 0
 
 
-def _clean(mask: np.ndarray, min_blob_fraction: float) -> tuple[np.ndarray, int]:
-    """Open, close, fill holes, drop small blobs; returns the mask and the blob count."""
+def _clean(
+    mask: np.ndarray, min_blob_fraction: float, sure_bg: np.ndarray | None = None
+) -> tuple[np.ndarray, int]:
+    """Open, close, drop small blobs, fill holes; returns the mask and the blob count."""
     m = mask.astype(np.uint8)
     m = cv2.morphologyEx(m, cv2.MORPH_OPEN, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3)))
     m = cv2.morphologyEx(m, cv2.MORPH_CLOSE, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5)))
@@ -225,16 +329,26 @@ def _clean(mask: np.ndarray, min_blob_fraction: float) -> tuple[np.ndarray, int]
     areas = stats[1:, cv2.CC_STAT_AREA]
     keep = np.flatnonzero(areas >= min_blob_fraction * areas.max()) + 1
     out = np.isin(labels, keep)
-    return _fill_holes(out), int(len(keep))
+    return _fill_holes(out, sure_bg), int(len(keep))
 
 
-def _fill_holes(mask: np.ndarray) -> np.ndarray:
-    """Fill regions not connected to the image border (the body has no holes... mostly)."""
+def _fill_holes(mask: np.ndarray, sure_bg: np.ndarray | None = None) -> np.ndarray:
+    """Fill holes of the body region: tiny ones always, larger ones (arms meeting the body,
+    the gap between the legs closed by the feet) only when none of their pixels is clearly
+    background."""
     holes = ndimage.binary_fill_holes(mask) & ~mask
-    # arms meeting the body enclose real background gaps: fill only small holes
+    if not holes.any():
+        return mask
     n, labels, stats, _ = cv2.connectedComponentsWithStats(holes.astype(np.uint8), connectivity=4)
-    small = np.flatnonzero(stats[1:, cv2.CC_STAT_AREA] < 0.01 * mask.size) + 1
-    return mask | np.isin(labels, small)
+    area = stats[:, cv2.CC_STAT_AREA]
+    fill = area < 0.0005 * mask.size
+    if sure_bg is None:
+        fill |= area < 0.01 * mask.size
+    else:
+        seen_bg = np.bincount(labels[sure_bg], minlength=n) > 0
+        fill |= ~seen_bg & (area < 0.01 * mask.size)
+    fill[0] = False
+    return mask | fill[labels]
 
 
 def _bbox(mask: np.ndarray, margin: int) -> tuple[int, int, int, int]:
@@ -248,46 +362,92 @@ def _bbox(mask: np.ndarray, margin: int) -> tuple[int, int, int, int]:
     )
 
 
-def grabcut_refine(
-    frame: np.ndarray, seed: np.ndarray, sure: np.ndarray, *, iterations: int = 2, margin: int = 12
-) -> np.ndarray:
-    """GrabCut (thesis 4.1.1) on the seed's bounding box plus a margin.
+def grabcut_seeded(frame: np.ndarray, labels: np.ndarray, *, iterations: int = 2) -> np.ndarray:
+    """GrabCut (thesis 4.1.1) from a trimap instead of a box.
 
     Parameters
     ----------
     frame : ndarray of uint8, shape (H, W, 3)
-        RGB image.
-    seed : ndarray of bool, shape (H, W)
-        Probable foreground; the rest of the box is probable background, outside is
-        background.
-    sure : ndarray of bool, shape (H, W)
-        Certain foreground (strong, eroded difference).
-    iterations, margin : int
+        RGB image (or a crop).
+    labels : ndarray of uint8, shape (H, W)
+        ``cv2.GC_BGD``, ``GC_FGD``, ``GC_PR_BGD`` or ``GC_PR_FGD`` per pixel: sure labels
+        from a clear background difference, probable ones where it is ambiguous or unknown.
+    iterations : int
 
     Returns
     -------
     mask : ndarray of bool, shape (H, W)
+        Foreground; the probable-foreground labels when GrabCut cannot build its colour
+        models (no background or no foreground sample).
     """
-    if not seed.any():
-        return seed
-    r0, r1, c0, c1 = _bbox(seed, margin)
-    crop = np.ascontiguousarray(frame[r0:r1, c0:c1, ::-1])
-    gc = np.full(crop.shape[:2], cv2.GC_PR_BGD, np.uint8)
-    gc[seed[r0:r1, c0:c1]] = cv2.GC_PR_FGD
-    gc[sure[r0:r1, c0:c1]] = cv2.GC_FGD
-    # the box border is background: GrabCut needs background samples for its colour model
-    gc[[0, -1], :] = np.where(gc[[0, -1], :] == cv2.GC_FGD, cv2.GC_FGD, cv2.GC_BGD)
-    gc[:, [0, -1]] = np.where(gc[:, [0, -1]] == cv2.GC_FGD, cv2.GC_FGD, cv2.GC_BGD)
-    if not np.any((gc == cv2.GC_BGD) | (gc == cv2.GC_PR_BGD)):
-        return seed
+    gc = labels.copy()
+    fallback = (gc == cv2.GC_FGD) | (gc == cv2.GC_PR_FGD)
+    has_bg = np.any((gc == cv2.GC_BGD) | (gc == cv2.GC_PR_BGD))
+    if not has_bg or not fallback.any():
+        return fallback
     bgd, fgd = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
     try:
-        cv2.grabCut(crop, gc, None, bgd, fgd, iterations, cv2.GC_INIT_WITH_MASK)
-    except cv2.error:  # degenerate colour model (e.g. uniform crop): keep the seed
-        return seed
-    out = np.zeros_like(seed)
-    out[r0:r1, c0:c1] = (gc == cv2.GC_FGD) | (gc == cv2.GC_PR_FGD)
-    return out
+        cv2.grabCut(np.ascontiguousarray(frame[..., ::-1]), gc, None, bgd, fgd, iterations,
+                    cv2.GC_INIT_WITH_MASK)  # fmt: skip
+    except cv2.error:  # degenerate colour model (e.g. uniform crop): keep the trimap
+        return fallback
+    return (gc == cv2.GC_FGD) | (gc == cv2.GC_PR_FGD)
+
+
+def segment_frame(
+    frame: np.ndarray, background: Background, settings: ForegroundSettings
+) -> tuple[np.ndarray, np.ndarray, int, dict]:
+    """Body region of one frame against a background model (thesis 4.1.1, seed 001 3.1.3).
+
+    The colour distance to the background, over a per-pixel threshold
+    ``max(threshold, noise_factor * noise)``, gives a trimap: twice the threshold is sure
+    foreground, under half of it sure background, in between and the never-seen pixels are
+    left to GrabCut, run only on the bounding box of those ambiguous pixels near the body.
+
+    Returns
+    -------
+    mask : ndarray of bool, shape (H, W)
+    raw : ndarray of bool, shape (H, W)
+        Thresholded difference (before clean-up).
+    blobs : int
+    timing : dict
+        Seconds in ``difference`` and ``grabcut``.
+    """
+    s = settings
+    t0 = time.perf_counter()
+    lab = _lab(frame[None], s.blur_sigma_px)[0]
+    d = _distance(lab, background.lab)
+    never = background.never
+    if never.any():
+        d[never] = _distance(lab[never][:, None], background.never_samples).min(1)
+    thr = np.maximum(s.threshold, s.noise_factor * background.noise)
+    thr[never] = s.threshold * s.never_factor
+    raw = d > thr
+    strong = d > 2 * thr
+    sure_bg = d < 0.5 * thr
+    coarse, blobs = _clean(raw, s.min_blob_fraction, sure_bg)
+    timing = {"difference": time.perf_counter() - t0, "grabcut": 0.0}
+    if not (s.grabcut and coarse.any()):
+        return coarse, raw, blobs, timing
+    t0 = time.perf_counter()
+    near = cv2.dilate(coarse.astype(np.uint8), np.ones((9, 9), np.uint8)) > 0
+    ambiguous = near & ~sure_bg & ~strong
+    if ambiguous.sum() < s.min_ambiguous_px:
+        timing["grabcut"] = time.perf_counter() - t0
+        return coarse, raw, blobs, timing
+    r0, r1, c0, c1 = _bbox(coarse | (ambiguous & near), s.grabcut_margin_px)
+    crop = (slice(r0, r1), slice(c0, c1))
+    gc = np.full((r1 - r0, c1 - c0), cv2.GC_PR_BGD, np.uint8)
+    gc[coarse[crop]] = cv2.GC_PR_FGD
+    gc[sure_bg[crop]] = cv2.GC_BGD
+    gc[~near[crop]] = cv2.GC_BGD
+    sure_fg = cv2.erode((coarse & strong).astype(np.uint8), np.ones((3, 3), np.uint8))
+    gc[sure_fg[crop] > 0] = cv2.GC_FGD
+    m = np.zeros_like(coarse)
+    m[crop] = grabcut_seeded(frame[crop], gc, iterations=s.grabcut_iterations)
+    mask, blobs = _clean(m, s.min_blob_fraction, sure_bg)
+    timing["grabcut"] = time.perf_counter() - t0
+    return mask, raw, blobs, timing
 
 
 def skin_mask(frame: np.ndarray) -> np.ndarray:
@@ -346,9 +506,11 @@ def extract_foreground(
     s = settings
     timing = {"background": 0.0, "difference": 0.0, "grabcut": 0.0, "skin": 0.0}
     t0 = time.perf_counter()
-    bg, never = estimate_background(
-        f, samples=s.background_samples, threshold=s.threshold, blur_sigma_px=s.blur_sigma_px
-    )
+    bg = estimate_background(
+        f, samples=s.background_samples, threshold=s.threshold, blur_sigma_px=s.blur_sigma_px,
+        min_free_fraction=s.min_free_fraction,
+    )  # fmt: skip
+    never = bg.never
     timing["background"] = time.perf_counter() - t0
     n, h, w = f.shape[:3]
     sil = np.zeros((n, h, w), bool)
@@ -357,24 +519,9 @@ def extract_foreground(
     flags: list[tuple[str, ...]] = []
     grow = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (15, 15))
     for i in range(n):
-        t0 = time.perf_counter()
-        diff = _difference(f[i : i + 1], bg, s.blur_sigma_px)[0]
-        raw = diff > s.threshold
-        coarse, blobs = _clean(raw, s.min_blob_fraction)
-        timing["difference"] += time.perf_counter() - t0
-        mask = coarse
-        if s.grabcut and coarse.any():
-            t0 = time.perf_counter()
-            sure = cv2.erode(
-                (coarse & (diff > 2 * s.threshold)).astype(np.uint8), np.ones((5, 5), np.uint8)
-            ).astype(bool)
-            mask, blobs = _clean(
-                grabcut_refine(
-                    f[i], coarse, sure, iterations=s.grabcut_iterations, margin=s.grabcut_margin_px
-                ),
-                s.min_blob_fraction,
-            )
-            timing["grabcut"] += time.perf_counter() - t0
+        mask, raw, blobs, t = segment_frame(f[i], bg, s)
+        timing["difference"] += t["difference"]
+        timing["grabcut"] += t["grabcut"]
         t0 = time.perf_counter()
         if s.skin and mask.any():
             near = cv2.dilate(mask.astype(np.uint8), grow).astype(bool)
@@ -388,7 +535,7 @@ def extract_foreground(
         flags.append(_flags(mask, raw, blobs, never, s, grow))
         if on_progress is not None:
             on_progress("foreground", (i + 1) / n)
-    return ForegroundResult(sil, edges, skin, bg, tuple(flags), timing)
+    return ForegroundResult(sil, edges, skin, bg.image, tuple(flags), timing)
 
 
 def _flags(

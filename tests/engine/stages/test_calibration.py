@@ -21,7 +21,9 @@ def test_recovers_a_rendered_camera_and_azimuth():
     shape = BodyShape.default(1.75)
     from engine.body.kinematics import forward_kinematics
 
-    j = forward_kinematics(shape.offsets, np.array([0, 1.0, 0]), np.broadcast_to(np.eye(3), (12, 3, 3)))
+    j = forward_kinematics(
+        shape.offsets, np.array([0, 1.0, 0]), np.broadcast_to(np.eye(3), (12, 3, 3))
+    )
     true = Camera(scale=100.0, theta_z=np.radians(3), cx=150, cy=200, azimuth=np.radians(90))
     r = capsules.render(j, shape, true)
     cam, rep = calibrate(j, shape, r.silhouette, r.edges)
@@ -31,7 +33,11 @@ def test_recovers_a_rendered_camera_and_azimuth():
 
 
 @pytest.mark.skipif(not P1.exists(), reason="public cases not beside the clone")
-@pytest.mark.xfail(strict=True, reason="measured scale -3.5 % (40 frames) / -2.0 % (full video)")
+@pytest.mark.xfail(
+    strict=True,
+    reason="measured scale -3.1 % on P1 (full video; -5.5 % on P2): the frame-0 silhouette misses "
+    "the dark shoes, which print into the background",
+)
 def test_public_case_p1_camera():
     from engine.io.bvh import load_reference
     from engine.io.video import read_video

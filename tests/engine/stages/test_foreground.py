@@ -30,13 +30,29 @@ def test_synthetic_blob_on_static_background(rng):
     assert "no_person" not in fg.flags[5]
 
 
+def test_hole_showing_background_stays_open():
+    from engine.stages.foreground import _fill_holes
+
+    body = np.zeros((200, 200), bool)  # the gap is 0.3 % of the image
+    body[5:35, 5:25] = True
+    body[12:30, 12:18] = False  # a gap closed all round (legs joined by the feet)
+    sure_bg = np.zeros_like(body)
+    sure_bg[20, 15] = True
+    assert not _fill_holes(body, sure_bg)[20, 15]
+    assert _fill_holes(body, np.zeros_like(body))[20, 15]
+
+
 def test_validation():
     with pytest.raises(InvalidInput, match="frames must be uint8"):
         extract_foreground(np.zeros((1, 4, 4, 3), np.uint8))
 
 
 @pytest.mark.skipif(not P1.exists(), reason="public cases not beside the clone")
-@pytest.mark.xfail(strict=True, reason="measured precision 0.89 vs dilated capsules (GrabCut leaks)")
+@pytest.mark.xfail(
+    strict=True,
+    reason="measured IoU vs the truth body with fitted widths 0.81 (P1) / 0.73-0.76 (P2): the dark "
+    "shoes, which hardly move, print into the background and are missed",
+)
 def test_public_case_p1_matches_truth_body():
     from engine.io.bvh import load_reference
     from engine.io.video import read_video
