@@ -6,12 +6,17 @@ Prints, measured in this one run on one core: full-body silhouette comparisons p
 pyrender frames per second for the same capsule body (trimesh capsules, OffscreenRenderer,
 OrthographicCamera). Timings on a shared machine are noisy: the best of a few repeats is shown.
 
-Run: .venv/bin/python benchmarks/render.py
+Single-part rates are given per part (sampling 2000 poses of that part against the 11 others
+cached) and for all 12 parts together (harmonic mean: the rate of a sweep that scores the same
+number of samples for every part).
+
+Run: NUMBA_NUM_THREADS=1 taskset -c 0 .venv/bin/python benchmarks/render.py [repeats]
 """
 
 from __future__ import annotations
 
 import os
+import sys
 import time
 
 os.environ["PYOPENGL_PLATFORM"] = "egl"  # before pyrender (and PyOpenGL) are imported
@@ -20,7 +25,7 @@ import numpy as np  # noqa: E402
 
 from engine.body.kinematics import forward_kinematics, rotation_about_axis  # noqa: E402
 from engine.body.shapes import BodyShape, capsule_endpoints  # noqa: E402
-from engine.body.skeleton import N_PARTS, PART_INDEX  # noqa: E402
+from engine.body.skeleton import N_PARTS, PART_INDEX, PARTS  # noqa: E402
 from engine.render.camera import Camera  # noqa: E402
 from engine.render.capsules import (  # noqa: E402
     PartScorer,
@@ -73,36 +78,41 @@ def _best_rate(fn, n_items: int, repeats: int = 3) -> float:  # noqa: ANN001
     return n_items / best
 
 
-def bench_full(shape: BodyShape, width: int, height: int, rng: np.random.Generator) -> tuple:
+def bench_full(
+    shape: BodyShape, width: int, height: int, rng: np.random.Generator, repeats: int
+) -> tuple:
     cam = _camera(shape, width, height)
     target = Target.from_render(render(_posture(shape, _base_rotations()), shape, cam))
     J = _samples(shape, 4000, rng)
     d_A_batch(J[:2], target, shape, cam)  # compile / load the numba cache
     d_S_batch(J[:2], target, shape, cam)
-    sil = _best_rate(lambda: d_A_batch(J, target, shape, cam), len(J))
-    full = _best_rate(lambda: d_S_batch(J[:1000], target, shape, cam), 1000)
+    sil = _best_rate(lambda: d_A_batch(J, target, shape, cam), len(J), repeats)
+    full = _best_rate(lambda: d_S_batch(J[:1000], target, shape, cam), 1000, repeats)
     return sil, full
 
 
-def bench_part(shape: BodyShape, rng: np.random.Generator) -> dict[str, float]:
+def bench_part(shape: BodyShape, rng: np.random.Generator, repeats: int) -> dict[str, float]:
+    """Single-part d_S rates per part, and over all 12 parts (total samples / total time)."""
     cam = _camera(shape, 320, 240)
     base = _posture(shape, _base_rotations())
     target = Target.from_render(render(base, shape, cam))
     scorer = PartScorer(target, shape, cam, base)
     J = _samples(shape, 2000, rng)
     rates = {}
-    for name in ("l_lower_arm", "l_upper_leg", "abdomen"):
-        p = PART_INDEX[name]
-        scorer.score(p, J[:2])  # builds the fixed-part cache once, as BP does per part
-        rates[name] = _best_rate(lambda p=p: scorer.score(p, J), len(J))
     for p in range(N_PARTS):
-        scorer.score(p, J[:2])
+        scorer.score(p, J[:2])  # builds the fixed-part cache once, as BP does per part
+        rates[PARTS[p]] = _best_rate(lambda p=p: scorer.score(p, J), len(J), repeats)
+    # the harmonic mean: what a BP sweep that samples every part equally often gets
+    rates["all 12 parts"] = N_PARTS / sum(1.0 / rates[name] for name in PARTS)
 
-    def every_part() -> None:
+    def bp_sweep() -> None:
+        # as stage 3 does per iteration: a new context (every cache dropped), then 40
+        # samples (settings.candidates.n_samples) of each part, cache build included
+        scorer.set_pose(base)
         for p in range(N_PARTS):
-            scorer.score(p, J[:500])
+            scorer.score(p, J[:40])
 
-    rates["all 12 parts"] = _best_rate(every_part, 500 * N_PARTS)
+    rates["BP sweep, 40/part"] = _best_rate(bp_sweep, 40 * N_PARTS, 3 * repeats)
     return rates
 
 
@@ -152,15 +162,16 @@ def bench_pyrender(shape: BodyShape, frames: int = 30) -> float | str:
 
 
 def main() -> None:
+    repeats = int(sys.argv[1]) if len(sys.argv) > 1 else 5
     rng = np.random.default_rng(0)
     shape = BodyShape.default()
-    print("capsule rasteriser, one core (shared machine: figures are noisy)")
+    print(f"capsule rasteriser, one core, best of {repeats} (shared machine: figures are noisy)")
     for w, h in ((160, 120), (320, 240)):
-        sil, full = bench_full(shape, w, h, rng)
+        sil, full = bench_full(shape, w, h, rng, repeats)
         print(f"  {w}x{h}: full-body silhouette + d_A   {sil:10,.0f} /s")
         print(f"  {w}x{h}: full-body d_S (d_A + d_E)    {full:10,.0f} /s")
-    for name, rate in bench_part(shape, rng).items():
-        print(f"  320x240: single-part d_S, {name:<12s} {rate:10,.0f} /s (incremental)")
+    for name, rate in bench_part(shape, rng, repeats).items():
+        print(f"  320x240: single-part d_S, {name:<17s} {rate:10,.0f} /s (incremental)")
     fps = bench_pyrender(shape)
     if isinstance(fps, str):
         print(f"pyrender: {fps}")

@@ -307,6 +307,147 @@ def edge_mask(label: np.ndarray, cov: np.ndarray, body: np.ndarray, out: np.ndar
 
 
 @njit(cache=True)
+def _raster_image(
+    ends: np.ndarray,
+    zends: np.ndarray,
+    rad_px: np.ndarray,
+    rad_m: np.ndarray,
+    part: np.ndarray,
+    seam: np.ndarray,
+    caps: np.ndarray,
+    inv_s2: float,
+    z: np.ndarray,
+    label: np.ndarray,
+    cov: np.ndarray,
+    body: np.ndarray,
+    rlo: np.ndarray,
+    rhi: np.ndarray,
+) -> tuple:
+    """:func:`raster_parts` into whole-image buffers, widening the per-row extents written.
+
+    ``rlo``/``rhi`` (H,) are the first and last column written per row (W and -1 when none);
+    returns the first and last row written (H, -1 when none).
+    """
+    H, W = z.shape
+    vmin = H
+    vmax = -1
+    for i in range(caps.shape[0]):
+        c = caps[i]
+        ax, ay = ends[c, 0, 0], ends[c, 0, 1]
+        bx, by = ends[c, 1, 0], ends[c, 1, 1]
+        za, zb = zends[c, 0], zends[c, 1]
+        r = rad_px[c]
+        rm2 = rad_m[c] * rad_m[c]
+        dx = bx - ax
+        dy = by - ay
+        l2 = dx * dx + dy * dy
+        inv_l2 = 1.0 / l2 if l2 > 0.0 else 0.0
+        bit = np.uint16(1 << part[c])
+        s0 = seam[c, 0]
+        s1 = seam[c, 1]
+        pk = np.int8(part[c])
+        v0 = max(_ceil(min(ay, by) - r), 0)
+        v1 = min(_floor(max(ay, by) + r), H - 1)
+        for v in range(v0, v1 + 1):
+            a0, a1 = row_span(ax, ay, bx, by, r, v)
+            if not a0 <= a1:
+                continue
+            i0 = max(_ceil(a0), 0)
+            i1 = min(_floor(a1), W - 1)
+            if i0 > i1:
+                continue
+            rlo[v] = min(rlo[v], i0)
+            rhi[v] = max(rhi[v], i1)
+            vmin = min(vmin, v)
+            vmax = max(vmax, v)
+            zr = z[v]
+            lr = label[v]
+            cr = cov[v]
+            br = body[v]
+            for u in range(i0, i1 + 1):
+                tr = ((u - ax) * dx + (v - ay) * dy) * inv_l2
+                t = min(max(tr, 0.0), 1.0)
+                px = u - (ax + t * dx)
+                py = v - (ay + t * dy)
+                d2 = (px * px + py * py) * inv_s2
+                zs = za + t * (zb - za) - math.sqrt(max(rm2 - d2, 0.0))
+                cr[u] |= bit
+                if not ((tr < 0.0 and s0) or (tr > 1.0 and s1)):
+                    br[u] |= bit
+                if zs < zr[u]:
+                    zr[u] = zs
+                    lr[u] = pk
+    return vmin, vmax
+
+
+@njit(cache=True)
+def render_image(
+    ends: np.ndarray,
+    zends: np.ndarray,
+    rad_px: np.ndarray,
+    rad_m: np.ndarray,
+    part: np.ndarray,
+    seam: np.ndarray,
+    caps: np.ndarray,
+    scale: float,
+    target: np.ndarray,
+    z: np.ndarray,
+    sil: np.ndarray,
+    edge: np.ndarray,
+    flags: np.ndarray,
+    out_i: np.ndarray,
+) -> None:
+    """Whole-image render of capsules ``caps`` of one posture, touching only covered rows.
+
+    Equal to :func:`raster_parts` over the whole image followed by :func:`edge_mask`, without
+    scanning the background (profile: the edge pass over the whole image was most of the
+    cost of :class:`~engine.render.capsules.PartScorer`'s fixed-part cache).
+
+    Parameters
+    ----------
+    target : (H, W) bool
+    z : (H, W) float64 receives the depth (inf = empty); sil, edge : (H, W) bool, zeroed by
+    the caller, receive the silhouette and the visible part outlines
+    flags : (H, W) uint8, zeroed by the caller, receives what :func:`part_counts` reads per
+    pixel in one byte: bit 0 covered, bit 1 target and not covered, bit 2 outline
+    out_i : (3,) int64 receives (|A|, |A and target|, |E|)
+    """
+    H, W = z.shape
+    z[:] = _INF
+    label = np.full((H, W), -1, np.int8)
+    cov = np.zeros((H, W), np.uint16)
+    body = np.zeros((H, W), np.uint16)
+    rlo = np.full(H, W, np.int64)
+    rhi = np.full(H, -1, np.int64)
+    vmin, vmax = _raster_image(ends, zends, rad_px, rad_m, part, seam, caps,
+                               1.0 / (scale * scale), z, label, cov, body, rlo, rhi)  # fmt: skip
+    for v in range(H):
+        for u in range(W):
+            if target[v, u]:
+                flags[v, u] = 2
+    area = 0
+    inter = 0
+    ne = 0
+    for v in range(vmin, vmax + 1):
+        for u in range(rlo[v], rhi[v] + 1):
+            if label[v, u] < 0:
+                continue
+            sil[v, u] = True
+            f = 1
+            area += 1
+            if target[v, u]:
+                inter += 1
+            if _is_edge(label, cov, body, v, u):
+                edge[v, u] = True
+                f |= 4
+                ne += 1
+            flags[v, u] = f
+    out_i[0] = area
+    out_i[1] = inter
+    out_i[2] = ne
+
+
+@njit(cache=True)
 def full_counts(
     ends: np.ndarray,
     zends: np.ndarray,
@@ -320,7 +461,12 @@ def full_counts(
     out_i: np.ndarray,
     out_f: np.ndarray,
 ) -> None:
-    """Counts for d_S of many whole-body postures, each rasterised only inside its box.
+    """Counts for d_S of many whole-body postures, each touching only the pixels it covers.
+
+    Same geometry and depth order as :func:`raster_parts` (capsules in order, strictly nearer
+    wins). The buffers span the whole image and are cleared once; each posture records per
+    row the column extent it wrote, counts only inside those extents and clears them again
+    afterwards, instead of clearing and scanning its whole bounding box.
 
     Parameters
     ----------
@@ -331,41 +477,39 @@ def full_counts(
     N, C = ends.shape[0], ends.shape[1]
     H, W = target.shape
     caps = np.arange(C)
-    zb = np.empty((H, W))
-    lb = np.empty((H, W), np.int8)
-    cb = np.empty((H, W), np.uint16)
-    bb = np.empty((H, W), np.uint16)
+    z = np.full((H, W), _INF)
+    label = np.full((H, W), -1, np.int8)
+    cov = np.zeros((H, W), np.uint16)
+    body = np.zeros((H, W), np.uint16)
+    rlo = np.full(H, W, np.int64)
+    rhi = np.full(H, -1, np.int64)
+    inv_s2 = 1.0 / (scale * scale)
     for n in range(N):
-        # one pixel of margin so the outline test sees uncovered neighbours inside the box
-        r0, r1, c0, c1 = _bbox(ends[n], rad_px, caps, H, W, 1)
-        h = r1 - r0
-        w = c1 - c0
-        z = zb[:h, :w]
-        label = lb[:h, :w]
-        cov = cb[:h, :w]
-        body = bb[:h, :w]
-        z[:] = _INF
-        label[:] = -1
-        cov[:] = 0
-        body[:] = 0
-        raster_parts(ends[n], zends[n], rad_px, rad_m, part, seam, caps, scale, r0, c0,
-                     z, label, cov, body)  # fmt: skip
+        vmin, vmax = _raster_image(ends[n], zends[n], rad_px, rad_m, part, seam, caps, inv_s2,
+                                   z, label, cov, body, rlo, rhi)  # fmt: skip
         area = 0
         inter = 0
         ne = 0
         se = 0.0
-        for rr in range(h):
-            for cc in range(w):
-                if label[rr, cc] < 0:
+        for v in range(vmin, vmax + 1):
+            for u in range(rlo[v], rhi[v] + 1):
+                if label[v, u] < 0:
                     continue
                 area += 1
-                if target[r0 + rr, c0 + cc]:
+                if target[v, u]:
                     inter += 1
-                # the box has a one-pixel margin or ends at the image border, outside which
-                # nothing is covered, exactly as in the full render
-                if _is_edge(label, cov, body, rr, cc):
+                # outside the image nothing is covered, exactly as in the full render
+                if _is_edge(label, cov, body, v, u):
                     ne += 1
-                    se += dt[r0 + rr, c0 + cc]
+                    se += dt[v, u]
+        for v in range(vmin, vmax + 1):
+            for u in range(rlo[v], rhi[v] + 1):
+                z[v, u] = _INF
+                label[v, u] = -1
+                cov[v, u] = 0
+                body[v, u] = 0
+            rlo[v] = W
+            rhi[v] = -1
         out_i[n, 0] = area
         out_i[n, 1] = inter
         out_i[n, 2] = ne
@@ -381,10 +525,8 @@ def part_counts(
     seam: np.ndarray,
     caps: np.ndarray,
     scale: float,
-    fixed_sil: np.ndarray,
+    fixed_flags: np.ndarray,
     fixed_z: np.ndarray,
-    fixed_edge: np.ndarray,
-    target: np.ndarray,
     dt: np.ndarray,
     out_i: np.ndarray,
     out_f: np.ndarray,
@@ -392,36 +534,33 @@ def part_counts(
     """Changes of the d_S counts when one part (capsules ``caps``) joins a fixed body.
 
     For each sample n: added silhouette pixels, added overlap, visible outline pixels of the
-    moving part, and fixed outline pixels it hides (with their dt sums). Only the moving
-    part's box (plus one pixel for the outline test) is touched. Same geometry as
+    moving part, and fixed outline pixels it hides (with their dt sums). Only the pixels the
+    moving part covers (and their 4-neighbours) are touched. Same geometry as
     :func:`raster_parts` specialised to one part: one flag byte per pixel (bit 0 covered,
-    bit 1 covered outside a seam cap), the z-buffer written on first cover, and per-row
-    column extents so the counting pass skips uncovered pixels (profile: the generic path
-    spent most of its time initialising and scanning the four full box buffers).
+    bit 1 covered outside a seam cap), the z-buffer written on first cover, per-row column
+    extents so the counting pass skips uncovered rows and columns, and the extents cleared
+    after counting instead of clearing the whole box (profile: the generic path spent most
+    of its time initialising and scanning the four full box buffers). The fixed body comes
+    as one byte per pixel too (see :func:`render_image`), one read instead of three.
 
     Parameters
     ----------
     ends : (S, C, 2, 2); zends : (S, C, 2); only rows ``caps`` are read
-    fixed_sil, fixed_edge : (H, W) bool; fixed_z : (H, W) float64 (inf = empty)
+    fixed_flags : (H, W) uint8 from :func:`render_image`; fixed_z : (H, W) float64 (inf = empty)
     out_i : (S, 4) int64 (added area, added overlap, moving edges, hidden fixed edges)
     out_f : (S, 2) float64 (dt sum on moving edges, dt sum on hidden fixed edges)
     """
     S = ends.shape[0]
-    H, W = target.shape
-    zb = np.empty((H, W))
-    fb = np.zeros((H, W), np.uint8)
-    rlo = np.empty(H, np.int64)
-    rhi = np.empty(H, np.int64)
+    H, W = fixed_z.shape
+    # one pixel of border all round, never written, so the outline test needs no bounds checks
+    zb = np.empty((H + 2, W + 2))
+    fb = np.zeros((H + 2, W + 2), np.uint8)
+    rlo = np.full(H, W, np.int64)
+    rhi = np.full(H, -1, np.int64)
     inv_s2 = 1.0 / (scale * scale)
     for n in range(S):
-        r0, r1, c0, c1 = _bbox(ends[n], rad_px, caps, H, W, 1)
-        h = r1 - r0
-        w = c1 - c0
-        for rr in range(h):
-            rlo[rr] = w
-            rhi[rr] = -1
-            for cc in range(w):
-                fb[rr, cc] = 0
+        vmin = H
+        vmax = -1
         for i in range(caps.shape[0]):
             c = caps[i]
             ax, ay = ends[n, c, 0, 0], ends[n, c, 0, 1]
@@ -435,66 +574,81 @@ def part_counts(
             inv_l2 = 1.0 / l2 if l2 > 0.0 else 0.0
             s0 = seam[c, 0]
             s1 = seam[c, 1]
-            v0 = max(_ceil(min(ay, by) - r), r0)
-            v1 = min(_floor(max(ay, by) + r), r1 - 1)
+            v0 = max(_ceil(min(ay, by) - r), 0)
+            v1 = min(_floor(max(ay, by) + r), H - 1)
             for v in range(v0, v1 + 1):
                 a0, a1 = row_span(ax, ay, bx, by, r, v)
                 if not a0 <= a1:
                     continue
-                i0 = max(_ceil(a0), c0)
-                i1 = min(_floor(a1), c1 - 1)
+                i0 = max(_ceil(a0), 0)
+                i1 = min(_floor(a1), W - 1)
                 if i0 > i1:
                     continue
-                rr = v - r0
-                rlo[rr] = min(rlo[rr], i0 - c0)
-                rhi[rr] = max(rhi[rr], i1 - c0)
+                rlo[v] = min(rlo[v], i0)
+                rhi[v] = max(rhi[v], i1)
+                vmin = min(vmin, v)
+                vmax = max(vmax, v)
+                fr = fb[v + 1]
+                zr = zb[v + 1]
+                xr = fixed_flags[v]
                 for u in range(i0, i1 + 1):
                     tr = ((u - ax) * dx + (v - ay) * dy) * inv_l2
-                    cc = u - c0
-                    f = fb[rr, cc]
-                    if fixed_z[v, u] == _INF:
+                    f = fr[u + 1]
+                    if not xr[u] & 1:
                         # nothing fixed here: visible whatever its depth, skip the sqrt
-                        zb[rr, cc] = -_INF
+                        zr[u + 1] = -_INF
                     else:
                         t = min(max(tr, 0.0), 1.0)
                         px = u - (ax + t * dx)
                         py = v - (ay + t * dy)
                         d2 = (px * px + py * py) * inv_s2
                         zs = za + t * (zbb - za) - math.sqrt(max(rm2 - d2, 0.0))
-                        if f == 0 or zs < zb[rr, cc]:
-                            zb[rr, cc] = zs
+                        if f == 0 or zs < zr[u + 1]:
+                            zr[u + 1] = zs
                     f |= 1
                     if not ((tr < 0.0 and s0) or (tr > 1.0 and s1)):
                         f |= 2
-                    fb[rr, cc] = f
+                    fr[u + 1] = f
         add_a = 0
         add_i = 0
         ne = 0
         nh = 0
         se = 0.0
         sh = 0.0
-        for rr in range(h):
-            y = r0 + rr
-            for cc in range(rlo[rr], rhi[rr] + 1):
-                f = fb[rr, cc]
+        for v in range(vmin, vmax + 1):
+            fr = fb[v + 1]
+            up = fb[v]
+            dn = fb[v + 2]
+            zr = zb[v + 1]
+            xr = fixed_flags[v]
+            fzr = fixed_z[v]
+            for u in range(rlo[v], rhi[v] + 1):
+                f = fr[u + 1]
                 if f == 0:
                     continue
-                x = c0 + cc
-                if not fixed_sil[y, x]:
+                x = xr[u]
+                if not x & 1:
                     add_a += 1
-                    if target[y, x]:
+                    if x & 2:
                         add_i += 1
-                if zb[rr, cc] < fixed_z[y, x]:
-                    if fixed_edge[y, x]:
+                if zr[u + 1] < fzr[u]:
+                    if x & 4:
                         nh += 1
-                        sh += dt[y, x]
+                        sh += dt[v, u]
+                    # outside the image nothing is covered, exactly as in the full render
                     if f & 2 and (
-                        rr == 0 or rr == h - 1 or cc == 0 or cc == w - 1
-                        or not (fb[rr - 1, cc] & 1) or not (fb[rr + 1, cc] & 1)
-                        or not (fb[rr, cc - 1] & 1) or not (fb[rr, cc + 1] & 1)
+                        v == 0 or v == H - 1 or u == 0 or u == W - 1
+                        or not (up[u + 1] & 1) or not (dn[u + 1] & 1)
+                        or not (fr[u] & 1) or not (fr[u + 2] & 1)
                     ):  # fmt: skip
                         ne += 1
-                        se += dt[y, x]
+                        se += dt[v, u]
+        for v in range(vmin, vmax + 1):
+            fr = fb[v + 1]
+            for u in range(rlo[v], rhi[v] + 1):
+                fr[u + 1] = 0
+            rlo[v] = W
+            rhi[v] = -1
         out_i[n, 0] = add_a
         out_i[n, 1] = add_i
         out_i[n, 2] = ne

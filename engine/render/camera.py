@@ -16,6 +16,7 @@ is a side view. theta_z rotates the image clockwise on screen (v points down).
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -46,7 +47,9 @@ class Camera:
     width: int = 320
     height: int = 240
 
-    @property
+    # Cached: hot loops read these per call, and the camera is immutable. cached_property
+    # writes the instance __dict__ directly, which a frozen dataclass allows.
+    @cached_property
     def R_cam_world(self) -> np.ndarray:
         """Rotation from world to camera axes (x right, y down, z away), shape (3, 3)."""
         a = self.azimuth
@@ -54,18 +57,18 @@ class Camera:
         forward = -np.array([np.sin(a), 0.0, np.cos(a)])
         right = np.cross(forward, [0.0, 1.0, 0.0])
         down = np.cross(forward, right)
-        return np.stack([right, down, forward])
+        return _frozen(np.stack([right, down, forward]))
 
-    @property
+    @cached_property
     def A(self) -> np.ndarray:
         """The 2x3 linear part of the projection: pixels per metre, shape (2, 3)."""
         c, s = np.cos(self.theta_z), np.sin(self.theta_z)
-        return self.scale * (np.array([[c, -s], [s, c]]) @ self.R_cam_world[:2])
+        return _frozen(self.scale * (np.array([[c, -s], [s, c]]) @ self.R_cam_world[:2]))
 
-    @property
+    @cached_property
     def view_dir(self) -> np.ndarray:
         """Unit world vector pointing from the camera into the scene (depth grows along it)."""
-        return self.R_cam_world[2]
+        return _frozen(self.R_cam_world[2].copy())
 
     def project(self, points: np.ndarray) -> np.ndarray:
         """World points (..., 3) -> pixel positions (..., 2) as (u, v)."""
@@ -102,3 +105,9 @@ class Camera:
             width=int(d.get("width", 320)),
             height=int(d.get("height", 240)),
         )
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    """Read-only view: cached arrays are shared by every caller of one camera."""
+    a.setflags(write=False)
+    return a

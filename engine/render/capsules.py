@@ -470,6 +470,7 @@ class _Fixed:
     z: np.ndarray
     sil: np.ndarray
     edge: np.ndarray
+    flags: np.ndarray
     area: int
     inter: int
     n_edge: int
@@ -525,6 +526,12 @@ class PartScorer:
         self.lambda_A = float(lambda_A)
         self.lambda_E = float(lambda_E)
         self._fixed: dict[int, _Fixed] = {}
+        # the camera is fixed: its projection and radii are computed once, not per call
+        self._rad_m = np.asarray(shape.radii, dtype=float)
+        self._rad_px = self._rad_m * float(camera.scale)
+        self._A_T = camera.A.T
+        self._c = np.array([camera.cx, camera.cy])
+        self._view = camera.view_dir
         self.set_pose(joints)
 
     def set_pose(self, joints: np.ndarray) -> None:
@@ -554,16 +561,26 @@ class PartScorer:
         f = self._fixed.get(part)
         if f is None:
             caps = np.setdiff1d(_ALL_CAPS, PART_CAPSULES[part])
-            r = _render_caps(self._current(), caps, self.camera, _check_box(None, self.camera))
             t = self.target
+            # the whole-image render of the other parts, touching only the rows they cover
+            z = np.empty(t.silhouette.shape)
+            sil = np.zeros(t.silhouette.shape, dtype=bool)
+            edge = np.zeros(t.silhouette.shape, dtype=bool)
+            flags = np.zeros(t.silhouette.shape, dtype=np.uint8)
+            counts = np.empty(3, dtype=np.int64)
+            _raster.render_image(
+                self._ends, self._depth, self._rad_px, self._rad_m, _PART_I64, SEAM_END, caps,
+                float(self.camera.scale), t.silhouette, z, sil, edge, flags, counts,
+            )  # fmt: skip
             f = _Fixed(
-                z=r.depth,
-                sil=r.silhouette,
-                edge=r.edges,
-                area=int(np.count_nonzero(r.silhouette)),
-                inter=int(np.count_nonzero(r.silhouette & t.silhouette)),
-                n_edge=int(np.count_nonzero(r.edges)),
-                sum_edge=float(t.cost[r.edges].sum()),
+                z=z,
+                sil=sil,
+                edge=edge,
+                flags=flags,
+                area=int(counts[0]),
+                inter=int(counts[1]),
+                n_edge=int(counts[2]),
+                sum_edge=float(t.cost[edge].sum()),
             )
             self._fixed[part] = f
         return f
@@ -612,15 +629,15 @@ class PartScorer:
         e3 = a[:, :, None, :] + CAPSULE_T[caps][None, :, :, None] * (b - a)[:, :, None, :]
         ends = np.zeros((S, N_CAPSULES, 2, 2))
         depth = np.zeros((S, N_CAPSULES, 2))
-        ends[:, caps] = self.camera.project(e3)
-        depth[:, caps] = self.camera.depth(e3)
-        rm = np.asarray(self.shape.radii, dtype=float)
+        # the same arithmetic as Camera.project and Camera.depth, with A cached
+        ends[:, caps] = e3 @ self._A_T + self._c
+        depth[:, caps] = e3 @ self._view
         out_i = np.empty((S, 4), dtype=np.int64)
         out_f = np.empty((S, 2))
         t = self.target
         _raster.part_counts(
-            ends, depth, rm * self.camera.scale, rm, SEAM_END, caps,
-            float(self.camera.scale), fx.sil, fx.z, fx.edge, t.silhouette, t.cost, out_i, out_f,
+            ends, depth, self._rad_px, self._rad_m, SEAM_END, caps,
+            float(self.camera.scale), fx.flags, fx.z, t.cost, out_i, out_f,
         )  # fmt: skip
         dA = _d_A(fx.area + out_i[:, 0], fx.inter + out_i[:, 1], t.area)
         n_e = fx.n_edge + out_i[:, 2] - out_i[:, 3]
