@@ -10,9 +10,17 @@ Case (``--case DIR``): a bench case's video through stage 0 (foreground), its tr
 camera; the initial posture is the reference at the true C(t'). Prints the E_3B of the initial
 posture, of the selected candidate and of the best candidate, and E_2P of the selected one.
 
+End to end (``--case DIR --e2e``): stages 3 and 4 on every frame of the case with its true C
+(rounded) and camera, so they are judged apart from stages 0-2: the scorer's posture figures
+(selected and best-candidate E_3B, E_2P, bone-error estimation error, rank correlation of
+eps_t'), C's error before and after stage 4 and the boundary error. ``--out`` caches stage 3,
+``--reuse`` re-runs stage 4 alone with ``--sel key=value`` selection settings.
+
     .venv/bin/python benchmarks/candidates.py [--frames 50] [--thesis] [--seed 0] [--set k=v ...]
     .venv/bin/python benchmarks/candidates.py --case /work/shared/bench/cases/P1_warp_64_29 \
         --range 40:46 [--no-fit-radii]
+    .venv/bin/python benchmarks/candidates.py --case /work/shared/bench/cases/P1_warp_64_29 \
+        --e2e --out /tmp/p1_stage3.npz [--reuse --sel image_weight=2]
 """
 
 from __future__ import annotations
@@ -31,11 +39,11 @@ from engine.io.bvh import load_reference, sample_reference
 from engine.measures import d_B
 from engine.render.camera import Camera
 from engine.render.capsules import render
+from engine.stages.calibration import fit_body_shape
 from engine.stages.candidates import (
     _SUBTREE_JOINTS,
     CandidateSettings,
     estimate_candidates,
-    fit_radii,
 )
 
 CMU = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "cmu" / "64_29.bvh"
@@ -119,9 +127,9 @@ def on_case(args: argparse.Namespace, settings: CandidateSettings) -> None:
     if not args.no_fit_radii:
         t0 = time.perf_counter()
         joints0 = sample_reference(ref, np.array([truth["frames"][0]["reference_frame"]]))[0]
-        shape = fit_radii(fg["sil"][0], joints0, ref.shape, cam)
+        shape, _ = fit_body_shape(joints0, ref.shape, cam, fg["sil"][0])
         k = np.round(shape.radii / ref.shape.radii, 2)
-        print(f"fit_radii {time.perf_counter() - t0:.2f} s: factors {k}")
+        print(f"fit_body_shape {time.perf_counter() - t0:.2f} s: factors {k}")
     a, b = (int(x) for x in args.range.split(":"))
     rng = np.random.default_rng(args.seed)
     rows: dict[str, list[float]] = {
@@ -159,6 +167,105 @@ def on_case(args: argparse.Namespace, settings: CandidateSettings) -> None:
     print(f"{case.name} frames {a}:{b}")
 
 
+def _truth_eps(truth: dict) -> tuple[np.ndarray, np.ndarray]:
+    tb = np.array([f["bone_errors_deg"] for f in truth["frames"]], float)
+    return tb, tb.mean(-1)
+
+
+def end_to_end(args: argparse.Namespace, settings: CandidateSettings) -> None:
+    """Stages 3-4 on a whole case with the true C and camera (isolates them from stages 0-2).
+
+    Stage 3's output is cached in ``--out`` (an .npz) so stage 4 can be re-run alone with
+    ``--reuse``. Prints the scorer's posture metrics (selected and best E_3B, E_2P, bone-error
+    estimation error, rank correlation of eps_t') and C's error before and after stage 4.
+    """
+    from engine.io.bvh import load_reference as _load
+    from engine.pipeline import _reference_segments
+    from engine.stages.candidates import estimate_candidates_chunk
+    from engine.stages.selection import SelectionSettings, select_and_refine
+
+    case = Path(args.case)
+    truth = json.loads((case / "truth.json").read_text())
+    ref = _load(case / "reference.bvh")
+    cam = Camera.from_dict(truth["camera"])
+    fg = _foreground(case, Path(args.cache) if args.cache else None)
+    n = len(truth["frames"])
+    C_true = np.array([f["reference_frame"] for f in truth["frames"]], float)
+    C0 = np.clip(np.round(C_true), 0, ref.motion.frames - 1).astype(int)
+    out = Path(args.out) if args.out else None
+    if args.reuse and out is not None and out.exists():
+        z = np.load(out)
+        split = np.cumsum(z["counts"])[:-1]
+        cands, d_s = np.split(z["cands"], split), np.split(z["d_s"], split)
+        flags = [() for _ in range(n)]
+        secs = float(z["seconds"])
+    else:
+        shape = ref.shape
+        if not args.no_fit_radii:
+            shape, _ = fit_body_shape(ref.motion.joints[C0[0]], ref.shape, cam, fg["sil"][0])
+        t0 = time.perf_counter()
+        fcs = estimate_candidates_chunk(
+            fg["sil"], fg["edges"], cam, shape, ref.motion.joints[C0], settings=settings,
+            rng=np.random.default_rng(args.seed),
+        )  # fmt: skip
+        secs = (time.perf_counter() - t0) / n
+        cands, d_s = [f.candidates for f in fcs], [f.d_s for f in fcs]
+        flags = [f.flags for f in fcs]
+        if out is not None:
+            np.savez_compressed(
+                out, cands=np.concatenate(cands), d_s=np.concatenate(d_s),
+                counts=np.array([len(c) for c in cands]), seconds=secs,
+            )  # fmt: skip
+    sel_settings = SelectionSettings()
+    for kv in args.sel:
+        k, v = kv.split("=")
+        sel_settings = replace(sel_settings, **{k: type(getattr(sel_settings, k))(v)})
+    segs = _reference_segments(ref, case / "reference.bvh")
+    sel = select_and_refine(
+        cands, ref.motion.joints, segs, C0.astype(float), settings=sel_settings,
+        fps_ratio=truth["reference_fps"] / truth["fps"], candidate_flags=flags,
+        candidate_d_s=None if args.no_image_cost else d_s,
+    )  # fmt: skip
+    gt = np.array([f["joints_3d"] for f in truth["frames"]], float)
+    tb, teps = _truth_eps(truth)
+    init_err = np.degrees(d_B(ref.motion.joints[C0], gt))
+    sel_err = np.degrees(d_B(sel.joints, gt))
+    best_err = np.array([np.degrees(d_B(c, g).min()) for c, g in zip(cands, gt, strict=True)])
+    e2p = np.linalg.norm(
+        cam.project(sel.joints) - np.array([f["joints_2d"] for f in truth["frames"]]), axis=-1
+    ).mean()
+    from scipy.stats import spearmanr
+
+    est_b = np.degrees(sel.bone_errors)
+    ratio = truth["reference_fps"] / truth["fps"]
+    print(
+        f"{case.name}  s/frame {secs:.2f}  candidates/frame {np.mean([len(c) for c in cands]):.1f}"
+    )
+    print(f"  initial (ref at true C) E3B {init_err.mean():6.2f} deg")
+    print(f"  selected E3B            {sel_err.mean():6.2f} deg   E2P {e2p:5.2f} px")
+    print(f"  best-candidate E3B      {best_err.mean():6.2f} deg")
+    print(
+        f"  bone-error est. err     {np.abs(est_b - tb).mean():6.2f} deg  (all-zero estimate "
+        f"{np.abs(tb).mean():.2f})"
+    )
+    print(f"  rank corr eps           {spearmanr(np.degrees(sel.posture_error), teps)[0]:6.3f}")
+    print(
+        f"  C err video frames: before {np.abs(C0 - C_true).mean() / ratio:.2f}  after "
+        f"{np.abs(sel.C - C_true).mean() / ratio:.2f}"
+    )
+    warp = np.asarray(truth["warp"], float)
+    b_err = [
+        abs(r.performer_start - np.interp(r.reference_start, warp, np.arange(len(warp))))
+        for r in sel.segments[1:]
+    ]
+    print(
+        f"  boundary err video frames {np.mean(b_err):.2f} (initial "
+        f"{[r.initial_performer_start for r in sel.segments[1:]]}, found "
+        f"{[r.performer_start for r in sel.segments[1:]]})"
+    )
+    print(f"  selected == candidate 0 (BP best) in {np.mean(sel.selected == 0):.2f} of frames")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=50)
@@ -170,12 +277,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cache", help=".npz cache of the case's stage-0 foreground")
     ap.add_argument("--no-fit-radii", action="store_true")
     ap.add_argument("-v", "--verbose", action="store_true")
+    ap.add_argument("--e2e", action="store_true", help="stages 3-4 on the whole --case, true C")
+    ap.add_argument("--out", help="--e2e: .npz cache of stage 3's candidates")
+    ap.add_argument("--reuse", action="store_true", help="--e2e: reuse --out, run stage 4 only")
+    ap.add_argument("--sel", nargs="*", default=[], help="--e2e: selection settings key=value")
+    ap.add_argument("--no-image-cost", action="store_true", help="--e2e: thesis d_c = d_B only")
     args = ap.parse_args(argv)
     settings = CandidateSettings.thesis() if args.thesis else CandidateSettings()
     for kv in args.set:
         k, v = kv.split("=")
         settings = replace(settings, **{k: type(getattr(settings, k))(v)})
-    if args.case:
+    if args.case and args.e2e:
+        end_to_end(args, settings)
+    elif args.case:
         on_case(args, settings)
     else:
         synthetic(args, settings)

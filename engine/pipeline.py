@@ -53,6 +53,8 @@ class Prepared:
     reference_joints : ndarray, shape (T, 17, 3)
         Every frame of the BVH as given (frame numbers count the file's frames).
     shape : BodyShape
+        The performer's body: the reference's bones, capsule radii fitted to the calibration
+        frame (stage 1, :func:`engine.stages.calibration.fit_body_shape`).
     video : dict
         ``frames``, ``fps``, ``width``, ``height`` (working resolution), ``original_width``,
         ``original_height``.
@@ -98,11 +100,19 @@ class Prepared:
         return [range(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:], strict=True)]
 
     def initial_postures(self, frames: range) -> np.ndarray:
-        """B_C(t') turned by T_t' about the hip (thesis 4.6.4 initial estimate), (N, 17, 3)."""
+        """Initial estimates of stage 3 per frame, shape (N, 2, 17, 3).
+
+        First B_C(t') turned by T_t' about the hip (thesis 4.6.4), then B_C(t') itself.
+        Stage 2 samples T_t' on a coarse grid and a turn in depth barely changes the
+        silhouette: on P1 (truth: no turn) it chose 10 deg in most frames, which alone made
+        the initial posture 7.2 deg from B_C(t'). With both as starts (and candidates),
+        stage 4 weighs the turn's image evidence against its d_B.
+        """
         idx = np.asarray(frames)
         ref = self.reference_joints[self.C[idx]]
         hip = ref[:, :1]
-        return np.einsum("nij,nkj->nki", self.rotations[idx], ref - hip) + hip
+        turned = np.einsum("nij,nkj->nki", self.rotations[idx], ref - hip) + hip
+        return np.stack([turned, ref], axis=1)
 
     def save(self, path: PathLike) -> None:
         sil, sil_shape = pack_masks(self.silhouettes)
@@ -151,6 +161,8 @@ class CandidateChunk:
     frames : ndarray of int, shape (N,)
     candidates : list of ndarray, shape (K_t', 17, 3) each
     d_s : list of ndarray, shape (K_t',) each
+        d_S of each candidate against its frame's body region: stage 4's image evidence
+        (``candidate_d_s`` of :func:`engine.stages.selection.select_and_refine`).
     flags : tuple of tuple of str
     seconds : float
     """
@@ -220,7 +232,7 @@ def prepare(
     """
     from engine.io.bvh import load_reference
     from engine.io.video import read_video
-    from engine.stages import run_stages_0_2
+    from engine.stages import run_stages_0_2_full
 
     s = _settings(settings)
     t0 = time.perf_counter()
@@ -237,16 +249,17 @@ def prepare(
         offset = a
     segments = _reference_segments(reference, reference_path)
     load_s = time.perf_counter() - t0
-    fg, camera, aligned, timing = run_stages_0_2(
+    r = run_stages_0_2_full(
         reference, video, s.foreground, s.calibration, s.alignment, on_progress=on_progress
     )
+    fg, camera, aligned, timing = r.foreground, r.camera, r.alignment, r.timing_s
     h, w = video.frames.shape[1:3]
     return Prepared(
         reference_path=str(reference_path), video_path=str(video_path),
         reference_name=reference.motion.name or os.path.basename(str(reference_path)),
         reference_fps=float(reference.motion.fps),
         first_motion_frame=int(reference.motion.first_motion_frame),
-        reference_joints=reference.motion.joints, shape=reference.shape,
+        reference_joints=reference.motion.joints, shape=r.shape,
         video={"frames": int(video.n_frames), "fps": float(video.fps), "width": int(w),
                "height": int(h), "original_width": int(video.original_width),
                "original_height": int(video.original_height), "offset": offset},
@@ -298,7 +311,11 @@ def select(
     *,
     on_progress: ProgressFn | None = None,
 ) -> dict:
-    """Stage 4 (thesis 4.7) over all chunks -> the DESIGN.md result document."""
+    """Stage 4 (thesis 4.7) over all chunks -> the DESIGN.md result document.
+
+    The candidates' d_S travel with them, so selection weighs image evidence against the
+    distance to the reference (beyond the thesis, see ``SelectionSettings.image_weight``).
+    """
     from engine.io.result import build_result
     from engine.reference.domain import find_domain
     from engine.stages.selection import select_and_refine
@@ -318,11 +335,12 @@ def select(
         raise InvalidInput("candidate chunks must cover every video frame exactly once")
     cands = [k for c in order for k in c.candidates]
     flags = [f for c in order for f in c.flags]
+    d_s = [d for c in order for d in c.d_s]
     t0 = time.perf_counter()
     selection = select_and_refine(
         cands, prepared.reference_joints, prepared.segments, prepared.C.astype(float),
         settings=sel_settings, fps_ratio=prepared.reference_fps / prepared.video["fps"],
-        candidate_flags=flags, on_progress=on_progress,
+        candidate_flags=flags, candidate_d_s=d_s, on_progress=on_progress,
     )  # fmt: skip
     timing = dict(prepared.timing_s)
     timing["candidates"] = float(sum(c.seconds for c in order))

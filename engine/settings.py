@@ -98,6 +98,7 @@ PRESETS: dict[str, Settings] = {
     "fast": Settings(
         foreground=ForegroundSettings(grabcut=False),
         candidates=CandidateSettings(n_samples=16, n_iterations=5, refine_sweeps=2,
+                                     refine_step0_deg=2.0,
                                      n_candidates=8),  # fmt: skip
     ),
 }

@@ -3,8 +3,8 @@
 Runs stage 0 (foreground) on the video, takes C(t') and the camera from ``--truth`` (so stage 3
 can be judged alone), then stage 3 (thesis 4.6) on the chosen frames. Writes the DESIGN.md
 result format for those frames (joints_3d = lowest-cost candidate; the capsule radii are
-first fitted to the frame-0 silhouette, see ``fit_radii``) and optionally a plot of all
-candidates per frame from the front and the side (thesis fig. 4.11).
+first fitted to the frame-0 silhouette, see ``engine.stages.calibration.fit_body_shape``)
+and optionally a plot of all candidates per frame from the front and the side (thesis fig. 4.11).
 """
 
 from __future__ import annotations
@@ -47,7 +47,8 @@ def run(args: argparse.Namespace) -> int:
     from engine.io.video import read_video
     from engine.measures import bone_angles
     from engine.render.camera import Camera
-    from engine.stages.candidates import CandidateSettings, estimate_candidates, fit_radii
+    from engine.stages.calibration import fit_body_shape
+    from engine.stages.candidates import CandidateSettings, estimate_candidates
     from engine.stages.foreground import extract_foreground
 
     t0 = time.perf_counter()
@@ -63,8 +64,8 @@ def run(args: argparse.Namespace) -> int:
     settings = CandidateSettings()
     # the performer's girth from the calibration frame, where the posture is the reference's
     c0 = float(truth["frames"][0]["reference_frame"])
-    shape = fit_radii(
-        fg.silhouettes[0], sample_reference(ref, np.array([c0]))[0], ref.shape, camera
+    shape, _ = fit_body_shape(
+        sample_reference(ref, np.array([c0]))[0], ref.shape, camera, fg.silhouettes[0]
     )
     rng = np.random.default_rng(args.seed)
     out_frames, prev, all_cands = [], None, []

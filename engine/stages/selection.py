@@ -62,6 +62,29 @@ class SelectionSettings:
         Fewest video frames a performed segment spans (end - start).
     large_error_deg : float
         Mean posture error above which the performance is "very different" (6.7).
+    image_weight : float
+        mu of the image-evidence term of the candidate cost, radians of d_B per unit of d_S
+        (beyond the thesis): d_c'(t', t, l) = d_B(B_t, B'_t'l) + mu (d_S(B'_t'l) - min_k
+        d_S(B'_t'k)). The thesis' d_c (eq. 4.25) alone picks the candidate closest to the
+        reference; when the initial posture (the reference itself) is among the candidates it
+        always wins and no error is ever detected. The term makes a candidate pay for
+        explaining the image worse than the best one. 0 gives the thesis' cost. Used only when
+        ``candidate_d_s`` is given.
+    image_margin : float
+        Candidates whose d_S exceeds their frame's best by more than this are not
+        image-consistent and are dropped from selection (never the frame's best). The
+        default keeps every candidate: on the public cases the capsule body's lowest d_S
+        lies 10-30 deg from the truth, 0.05-0.1 below the true posture's, so a tight margin
+        drops the only right candidate.
+    anchor_deg_per_frame : float
+        Cost (degrees of d_B) per video frame that C(t') departs from stage 2's C, and
+        likewise per video frame a performer boundary departs from stage 2's (4.7.1 step 4);
+        beyond the thesis. The thesis' DP (eq. 4.24) lets C wander wherever the candidates
+        fit a little better; with the capsule body's noisy candidates C got worse than stage
+        2's: on P1 (stage 2 C error 1.51 video frames) 5.48 without the anchor, 1.78 with 1,
+        1.61 with 3; with the true C as input 0.06 -> 0.55 without, 0.2 with 1. Larger
+        values stop the DP from correcting a rough C with good candidates (the synthetic
+        test with stage 2's uniform-speed C needs <= ~2). 0 gives the thesis' DP.
     """
 
     window_k: float = 10.0
@@ -75,6 +98,9 @@ class SelectionSettings:
     extra_tempo: float = 3.0
     min_segment_frames: int = 2
     large_error_deg: float = 40.0
+    image_weight: float = 2.0
+    image_margin: float = 1.0
+    anchor_deg_per_frame: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -210,6 +236,25 @@ def _pad(candidates: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     return out, valid
 
 
+def _image_cost(
+    d_s: Sequence[np.ndarray] | None, valid: np.ndarray, s: SelectionSettings
+) -> np.ndarray:
+    """mu (d_S - min_k d_S) per padded candidate, inf beyond the margin, shape (T', K_max)."""
+    out = np.zeros(valid.shape)
+    if d_s is None:
+        return out
+    if len(d_s) != valid.shape[0]:
+        raise InvalidInput(f"candidate_d_s: expected {valid.shape[0]} frames, got {len(d_s)}")
+    for i, d in enumerate(d_s):
+        d = np.asarray(d, float)
+        k = int(valid[i].sum())
+        if d.shape != (k,):
+            raise InvalidInput(f"candidate_d_s[{i}]: expected shape ({k},), got {d.shape}")
+        rel = d - d.min()
+        out[i, :k] = np.where(rel <= s.image_margin, s.image_weight * rel, np.inf)
+    return out
+
+
 def _angles(dirs_a: np.ndarray, dirs_b: np.ndarray) -> np.ndarray:
     """Bone angles from unit bone directions (..., 16, 3) -> (..., 16), radians."""
     return np.arccos(np.clip(np.sum(dirs_a * dirs_b, -1), -1.0, 1.0))
@@ -308,6 +353,8 @@ def _find_boundary(
     valid: np.ndarray,
     s: SelectionSettings,
     joint_ids: np.ndarray,
+    image: np.ndarray,
+    initial: int,
 ) -> tuple[int, bool]:
     """Performer boundary for reference boundary ``t_ref`` in [lo, hi].
 
@@ -323,6 +370,9 @@ def _find_boundary(
         joints = cand_joints[frames, seq]
         rel = joints[:, joint_ids] - joints[:, :1]
         err = _angles(ref_dirs[t_ref][None], cand_dirs[frames, seq]).mean(-1)  # d_B(B_t, B'_i)
+        # image evidence and the pull towards stage 2's boundary (see SelectionSettings)
+        err = err + image[frames, seq]
+        err = err + np.radians(s.anchor_deg_per_frame) * np.abs(frames - initial)
         for tau in _boundary_frames(rel, np.cos(np.radians(s.direction_change_deg)), s.pause_speed):
             if best is None or err[tau] < best[0]:
                 best = (float(err[tau]), int(lo + tau))
@@ -402,7 +452,8 @@ def refine_segment(
             prev_D[i:] = D[: n_r - i]
             prev_e[i:] = d_c[tp - 1, : n_r - i]
             # (n, K_prev, K): D(t'-1, t-i, k) + (d_c(t', t, l) - d_c(t'-1, t-i, k))^2
-            diff = cur[:, None, :] - prev_e[:, :, None]
+            with np.errstate(invalid="ignore"):
+                diff = cur[:, None, :] - prev_e[:, :, None]
             tot = prev_D[:, :, None] + np.where(np.isfinite(diff), diff * diff, np.inf)
             kk = np.argmin(tot, axis=1)
             val = np.take_along_axis(tot, kk[:, None, :], 1)[:, 0]
@@ -443,6 +494,7 @@ def select_and_refine(
     settings: SelectionSettings | None = None,
     fps_ratio: float = 1.0,
     candidate_flags: Sequence[Sequence[str]] | None = None,
+    candidate_d_s: Sequence[np.ndarray] | None = None,
     on_progress: ProgressFn | None = None,
 ) -> Selection:
     """Stage 4: boundaries, candidate selection, refined C and posture errors (thesis 4.7).
@@ -462,6 +514,10 @@ def select_and_refine(
         Reference fps / video fps, for tempo.
     candidate_flags : list of list of str, optional
         Stage-3 flags per video frame, passed through.
+    candidate_d_s : list of ndarray, shape (K_t',) each, optional
+        d_S of each candidate against its frame's body region (stage 3). When given, the
+        candidate cost carries the image evidence (``settings.image_weight``) and candidates
+        beyond ``settings.image_margin`` of their frame's best are dropped.
     on_progress : callable(stage, fraction), optional
 
     Returns
@@ -482,6 +538,8 @@ def select_and_refine(
         raise InvalidInput(f"settings.boundary_joints: unknown joints {unknown}")
     joint_ids = np.array([JOINT_INDEX[j] for j in s.boundary_joints])
     cand_joints, valid = _pad(cands)
+    image = _image_cost(candidate_d_s, valid, s)
+    valid = valid & np.isfinite(image)
     cand_dirs = bone_directions(cand_joints)
     ref_dirs = bone_directions(ref)
     n_v = len(cands)
@@ -499,8 +557,8 @@ def select_and_refine(
         hi = min(n_v - 1, initial[j] + s.boundary_window)
         lo = min(lo, hi)
         tau, ok = _find_boundary(
-            lo, hi, t_ref, ref_dirs, cand_dirs, cand_joints, valid, s, joint_ids
-        )
+            lo, hi, t_ref, ref_dirs, cand_dirs, cand_joints, valid, s, joint_ids, image, initial[j]
+        )  # fmt: skip
         p_starts.append(max(tau, p_starts[-1]))
         found.append(ok)
         if on_progress:
@@ -532,6 +590,10 @@ def select_and_refine(
     for i, ((ps, pe), (rs, re)) in enumerate(zip(spans, bounds, strict=True)):
         n_seg_v, n_seg_r = pe - ps + 1, re - rs + 1
         table = _segment_table(ref_dirs[rs : re + 1], cand_dirs[ps : pe + 1], valid[ps : pe + 1])
+        table = table + image[ps : pe + 1, None, :]
+        if s.anchor_deg_per_frame > 0:
+            off = np.abs(np.arange(n_seg_r)[None, :] - (C0[ps : pe + 1, None] - rs))
+            table = table + np.radians(s.anchor_deg_per_frame) * (off / fps_ratio)[..., None]
         min_step = 1 if n_seg_r >= n_seg_v else 0
         window = max(1, int(np.ceil(s.window_k * n_seg_r / max(n_seg_v, 1))))
         band = max(window, int(np.ceil(s.band * n_seg_r)))

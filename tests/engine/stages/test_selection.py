@@ -202,3 +202,49 @@ def test_validation_names_the_parameter():
             np.zeros(5),
             settings=SelectionSettings(boundary_joints=("x",)),
         )
+
+
+def _reference_and_truth(leg_peak_deg: float = 30.0):
+    """Per frame two candidates, the reference posture at the true C and the truth, with
+    d_S saying the truth explains the image better (0.00 vs 0.06)."""
+    warp = np.arange(0, 121, 4.0)
+    u = np.clip((warp - 40) / 40, 0, 1)
+    truth, ref = _performer(warp, leg_peak_deg * np.sin(np.pi * u))
+    at_c = _body(_arm_direction(warp), np.zeros(warp.size))
+    cands = [np.stack([at_c[t], truth[t]]) for t in range(warp.size)]
+    d_s = [np.array([0.06, 0.0])] * warp.size
+    return warp, truth, ref, cands, d_s
+
+
+def test_image_evidence_detects_errors_the_reference_candidate_would_hide():
+    warp, truth, ref, cands, d_s = _reference_and_truth()
+    thesis = select_and_refine(cands, ref, REF_SEGMENTS, warp, fps_ratio=4.0)
+    # eq. 4.25 alone: the reference posture is a candidate with d_c = 0, so it always wins
+    assert np.degrees(thesis.posture_error).max() < 1e-6
+    sel = select_and_refine(cands, ref, REF_SEGMENTS, warp, fps_ratio=4.0, candidate_d_s=d_s)
+    np.testing.assert_allclose(sel.joints, truth, atol=1e-9)
+    assert np.degrees(sel.segments[1].bone_mean_errors[[1, 2]]).min() > 15
+    assert np.degrees(sel.segments[0].mean_error) < 1e-6
+    np.testing.assert_array_equal(sel.C, warp.astype(int))
+
+
+def test_image_weight_zero_is_the_thesis_and_margin_drops_candidates():
+    warp, truth, ref, cands, d_s = _reference_and_truth()
+    off = SelectionSettings(image_weight=0.0)
+    sel = select_and_refine(
+        cands, ref, REF_SEGMENTS, warp, fps_ratio=4.0, candidate_d_s=d_s, settings=off
+    )
+    assert np.degrees(sel.posture_error).max() < 1e-6
+    tight = SelectionSettings(image_weight=0.0, image_margin=0.01)
+    sel = select_and_refine(
+        cands, ref, REF_SEGMENTS, warp, fps_ratio=4.0, candidate_d_s=d_s, settings=tight
+    )
+    assert np.all(sel.selected == 1)  # the reference candidate is beyond the margin
+
+
+def test_candidate_d_s_is_validated():
+    warp, _, ref, cands, d_s = _reference_and_truth()
+    with pytest.raises(InvalidInput, match="candidate_d_s: expected 31 frames"):
+        select_and_refine(cands, ref, REF_SEGMENTS, warp, candidate_d_s=d_s[:3])
+    with pytest.raises(InvalidInput, match=r"candidate_d_s\[0\]"):
+        select_and_refine(cands, ref, REF_SEGMENTS, warp, candidate_d_s=[np.zeros(3)] * 31)

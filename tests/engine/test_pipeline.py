@@ -1,0 +1,122 @@
+"""The resumable pipeline (prepare -> candidates -> select) on a tiny synthetic case."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from engine.body.kinematics import forward_kinematics, rotation_about_axis
+from engine.body.shapes import BodyShape
+from engine.errors import InvalidInput
+from engine.io.bvh import write_bvh
+from engine.io.case import write_case
+from engine.io.result import validate_result
+from engine.pipeline import CandidateChunk, Prepared, analyze, candidates, prepare, select
+from engine.synth import SynthSettings, synthesize
+from engine.types import Motion, Segments
+
+#: Small and fast: stages 0-2 as configured, stage 3 with few samples.
+SETTINGS = {
+    "preset": "fast",
+    "chunk_frames": 8,
+    "candidates": {"n_samples": 8, "n_iterations": 2, "refine_sweeps": 1, "n_candidates": 4},
+}
+
+
+class _Ref:
+    def __init__(self, motion: Motion, shape: BodyShape) -> None:
+        self.motion, self.shape = motion, shape
+
+
+@pytest.fixture(scope="module")
+def case_dir(tmp_path_factory):
+    """A 60 fps arm-and-leg swing, filmed at 15 fps (160 x 120) with one wrong segment."""
+    shape = BodyShape.default(1.75)
+    T = 60
+    s = np.sin(np.linspace(0.0, 2.0 * np.pi, T))
+    R = np.broadcast_to(np.eye(3), (T, 12, 3, 3)).copy()
+    x, z = np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0])
+    R[:, 4] = rotation_about_axis(z, -1.2 + 0.6 * s)
+    R[:, 5] = rotation_about_axis(x, 0.8 + 0.5 * s) @ R[:, 4]
+    R[:, 6] = rotation_about_axis(z, 1.2 - 0.6 * s)
+    R[:, 7] = R[:, 6]
+    R[:, 8] = rotation_about_axis(x, -0.4 * s)
+    R[:, 10] = rotation_about_axis(x, 0.4 * s)
+    root = np.stack([0.1 * s, 0.95 + 0.02 * s, np.zeros(T)], -1)
+    joints = forward_kinematics(shape.offsets, root, R)
+    folder = tmp_path_factory.mktemp("case")
+    bvh = write_bvh(folder / "swing.bvh", joints, 60.0, shape)
+    synth = synthesize(
+        _Ref(Motion(joints=joints, fps=60.0, name="swing"), shape),
+        settings=SynthSettings(
+            fps=15.0,
+            width=160,
+            height=120,
+            warp_strength=0.2,
+            n_wrong=1,
+            parts_per_wrong=1,
+            noise_sigma=2.0,
+        ),  # fmt: skip
+        rng=np.random.default_rng(3),
+        segments=Segments(starts=(0, 30), end=59),
+    )
+    written = write_case(synth, folder / "case", bvh)
+    return written
+
+
+@pytest.fixture(scope="module")
+def prepared(case_dir) -> Prepared:
+    return prepare(case_dir["reference"], case_dir["video"], SETTINGS)
+
+
+def _same(a, b) -> None:
+    for f in ("reference_joints", "silhouettes", "edges", "C", "rotations"):
+        np.testing.assert_array_equal(getattr(a, f), getattr(b, f), err_msg=f)
+    np.testing.assert_allclose(a.shape.radii, b.shape.radii)
+    np.testing.assert_allclose(a.shape.offsets, b.shape.offsets)
+    assert a.camera.to_dict() == b.camera.to_dict()
+    assert a.segments == b.segments and a.flags == b.flags and a.video == b.video
+
+
+def test_prepared_round_trip(prepared, tmp_path) -> None:
+    prepared.save(tmp_path / "prepared.npz")
+    _same(prepared, Prepared.load(tmp_path / "prepared.npz"))
+
+
+def test_initial_postures_are_the_turned_and_the_plain_reference(prepared) -> None:
+    init = prepared.initial_postures(range(prepared.n_frames))
+    assert init.shape == (prepared.n_frames, 2, 17, 3)
+    ref = prepared.reference_joints[prepared.C]
+    np.testing.assert_allclose(init[:, 1], ref)
+    np.testing.assert_allclose(init[:, 0, 0], ref[:, 0])  # turned about the hip
+    turned = init[:, 0] - ref[:, :1]
+    np.testing.assert_allclose(turned, (ref - ref[:, :1]) @ prepared.rotations.transpose(0, 2, 1))
+
+
+def test_candidate_chunk_round_trip_and_select(prepared, tmp_path) -> None:
+    chunks = [candidates(prepared, r, SETTINGS) for r in prepared.chunks(2)]
+    for i, c in enumerate(chunks):
+        assert len(c.candidates) == len(c.d_s) == len(c.frames)
+        assert all(len(k) == len(d) for k, d in zip(c.candidates, c.d_s, strict=True))
+        c.save(tmp_path / f"c{i}.npz")
+        back = CandidateChunk.load(tmp_path / f"c{i}.npz")
+        np.testing.assert_array_equal(back.frames, c.frames)
+        for k0, k1, d0, d1 in zip(c.candidates, back.candidates, c.d_s, back.d_s, strict=True):
+            np.testing.assert_array_equal(k0, k1)
+            np.testing.assert_array_equal(d0, d1)
+        assert back.flags == c.flags
+    doc = select(prepared, chunks[::-1], SETTINGS)  # any order
+    validate_result(doc)
+    with pytest.raises(InvalidInput, match="cover every video frame"):
+        select(prepared, chunks[:1], SETTINGS)
+
+
+def test_analyze_gives_a_valid_result(case_dir) -> None:
+    doc = analyze(case_dir["reference"], case_dir["video"], SETTINGS)
+    validate_result(doc)
+    n = len(doc["frames"])
+    assert n == doc["video"]["frames"] >= 10
+    ref = [f["reference_frame"] for f in doc["frames"]]
+    assert ref == sorted(ref)
+    for f in doc["frames"]:
+        assert 0 <= f["selected"] < len(f["candidates"])
