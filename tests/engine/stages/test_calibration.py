@@ -11,7 +11,7 @@ from engine.body.shapes import BodyShape
 from engine.errors import InvalidInput
 from engine.render import capsules
 from engine.render.camera import Camera
-from engine.stages.calibration import calibrate, principal_axes
+from engine.stages.calibration import CalibrationSettings, calibrate, principal_axes
 from tests.conftest import BENCH_CASES
 
 P1 = BENCH_CASES / "P1_warp_64_29"
@@ -33,24 +33,28 @@ def test_recovers_a_rendered_camera_and_azimuth():
 
 
 @pytest.mark.skipif(not P1.exists(), reason="public cases not beside the clone")
-@pytest.mark.xfail(
-    strict=True,
-    reason="measured scale -3.1 % on P1 (full video; -5.5 % on P2): the frame-0 silhouette misses "
-    "the dark shoes, which print into the background",
-)
 def test_public_case_p1_camera():
+    """Scale within 2 %, angle within 2 deg, position within 3 px of the true camera.
+
+    Measured with ``above_ankles``: -1.1 %, +0.8 deg, (-0.8, -0.7) px (without: -3.1 %,
+    cy -3.7 px). The whole video is read: the background model needs the performer to move,
+    and in the first 40 frames the head hardly does (it prints into the background and the
+    frame-0 region loses it: -3.4 % with 40 frames).
+    """
     from engine.io.bvh import load_reference
     from engine.io.video import read_video
     from engine.stages.foreground import extract_foreground
 
     ref = load_reference(P1 / "reference.bvh")
     truth = Camera.from_dict(json.loads((P1 / "truth.json").read_text())["camera"])
-    v = read_video(P1 / "video.mp4", max_frames=40)
+    v = read_video(P1 / "video.mp4")
     fg = extract_foreground(v.frames)
     j = ref.motion.joints[ref.motion.first_motion_frame]
-    cam, _ = calibrate(j, ref.shape, fg.silhouettes[0], fg.edges[0])
-    assert cam.scale == pytest.approx(truth.scale, rel=0.03)
+    cam, _ = calibrate(j, ref.shape, fg.silhouettes[0], fg.edges[0],
+                       CalibrationSettings(above_ankles=True))  # fmt: skip
+    assert cam.scale == pytest.approx(truth.scale, rel=0.02)
     assert abs(np.degrees(cam.theta_z - truth.theta_z)) < 2
+    assert abs(cam.cx - truth.cx) < 3 and abs(cam.cy - truth.cy) < 3
     assert abs(np.degrees(cam.azimuth)) < 1e-6
 
 
