@@ -14,6 +14,9 @@ REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"
 CMU = SHARED / "data" / "cmu"
 BENCH_CASES = SHARED / "bench" / "cases"
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                 "--disable-component-update", "--no-first-run"]  # fmt: skip
 
 
 @pytest.fixture
@@ -27,3 +30,19 @@ def cmu_bvh() -> Path:
     if not path.exists():
         pytest.skip("../shared/data/cmu is not beside the clone")
     return path
+
+
+@pytest.fixture(scope="session")
+def browser():
+    """One headless Debian Chromium for the whole session.
+
+    Playwright's sync API refuses to start inside a running one, so every browser test
+    (tests/browser, tests/web) shares this instance.
+    """
+    if not CHROMIUM.exists():
+        pytest.skip("Debian chromium is not installed at /usr/bin/chromium")
+    sync_api = pytest.importorskip("playwright.sync_api")
+    with sync_api.sync_playwright() as p:
+        b = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        yield b
+        b.close()

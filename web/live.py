@@ -78,12 +78,14 @@ class LiveViewers:
         port = free_port()
         server = viser.ViserServer(host=self.host, port=port, verbose=False)
         try:
-            # Embedded beside the video: a small, collapsible panel, no logo or share link.
+            # Embedded beside the video, the panel starts minimised to its title bar so the
+            # scene has the whole frame (the page shows the legend and drives the frame); no
+            # logo or share link. viser 1.1 deprecates control_layout for main_panel placement.
             server.gui.configure_theme(
-                control_layout="collapsible", control_width="small", show_logo=False,
-                show_share_button=False,
-            )  # fmt: skip
+                control_width="small", show_logo=False, show_share_button=False
+            )
             scene = build_scene(server, reference_joints, result)
+            server.gui.main_panel.minimize()
             wait_until_listening(port)
         except Exception as exc:
             server.stop()

@@ -23,11 +23,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.conftest import BENCH_CASES, CMU, REPO
+from tests.conftest import BENCH_CASES, CHROMIUM, CMU, REPO
 
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-                 "--disable-component-update", "--no-first-run"]  # fmt: skip
 SCREENSHOTS = REPO / "artifacts" / "screenshots"
 SOURCE_VIDEO = BENCH_CASES / "P1_warp_64_29" / "video.mp4"
 PASSWORD = "performer-password"
@@ -161,16 +158,6 @@ def server(tmp_path_factory) -> Server:
     except ProcessLookupError:
         pass
     log.close()
-
-
-@pytest.fixture(scope="session")
-def browser():
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-        yield b
-        b.close()
 
 
 @pytest.fixture(scope="session")

@@ -51,11 +51,7 @@ def test_upload_through_the_page_runs_to_results(server, browser, clip, shots):
     page = ctx.new_page()
     sign_in(page, server.url, "pat@example.com")
     assert page.url.endswith("/upload")
-    page.wait_for_selector(".ref-option img")
-    page.wait_for_function(
-        "Array.from(document.querySelectorAll('.ref-option img'))"
-        ".every(i => i.complete && i.naturalWidth > 0)"
-    )
+    page.wait_for_selector(".ref-option canvas[data-ready=true]")
     page.set_input_files("#video", str(clip))
     page.screenshot(path=str(shots / "upload.png"), full_page=True)
     page.get_by_role("button", name="Upload and analyse").click()
@@ -195,7 +191,7 @@ def test_coach_dashboard_and_references(server, browser, clip, clip_result, shot
     sign_in(page, server.url, COACH[0], COACH[1])
     assert page.url.endswith("/dashboard")
     assert page.locator("#analyses-table tbody tr").count() >= 1
-    page.get_by_label("Performer").select_option(label="Olive Iron")
+    page.get_by_label("Performer", exact=True).select_option(label="Olive Iron")
     page.get_by_label("Status").select_option("done")
     page.get_by_role("button", name="Filter").click()
     page.wait_for_url("**performer=*")
@@ -232,7 +228,7 @@ def test_phone_layout_upload_page(server, browser, shots):
     )
     page = ctx.new_page()
     sign_in(page, server.url, "pat@example.com")
-    page.wait_for_selector(".ref-option img")
+    page.wait_for_selector(".ref-option canvas[data-ready=true]")
     assert page.locator("#video").get_attribute("accept") == "video/*"
     assert page.locator("#video").get_attribute("capture") is not None
     width = page.evaluate("document.documentElement.scrollWidth")

@@ -7,7 +7,9 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[2]
-FORBIDDEN = ["app", "worker", "web", "pydantic", "celery", "redis", "viser", "fastapi", "sqlalchemy"]
+FORBIDDEN = [
+    "app", "worker", "web", "pydantic", "celery", "redis", "viser", "fastapi", "sqlalchemy",
+]
 
 BLOCKER = """
 import importlib.abc, sys, pkgutil, importlib

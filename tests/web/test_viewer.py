@@ -15,7 +15,6 @@ from engine.stages.selection import select_and_refine  # noqa: E402
 from engine.types import Segments  # noqa: E402
 from web.viewer.scene import build_scene, free_port, record_scene, wait_until_listening  # noqa: E402
 
-CHROMIUM = Path("/usr/bin/chromium")
 ARTIFACTS = Path(__file__).resolve().parents[2] / "artifacts"
 BASE = np.array([
     [0, 1, 0], [0.1, 1, 0], [0.1, 0.55, 0], [0.1, 0.1, 0], [-0.1, 1, 0], [-0.1, 0.55, 0],
@@ -87,10 +86,7 @@ def test_recording_is_written(server, analysis, tmp_path):
 
 
 @pytest.mark.browser
-def test_viewer_loads_in_chromium(server, analysis):
-    if not CHROMIUM.exists():
-        pytest.skip("Debian chromium is not installed at /usr/bin/chromium")
-    playwright = pytest.importorskip("playwright.sync_api")
+def test_viewer_loads_in_chromium(server, analysis, browser):
     ref, doc = analysis
     scene = build_scene(server, ref, doc)
     scene.set_frame(8)  # segment 2: the arm is red
@@ -98,19 +94,15 @@ def test_viewer_loads_in_chromium(server, analysis):
     wait_until_listening(port)
     ARTIFACTS.mkdir(exist_ok=True)
     shot = ARTIFACTS / "viewer.png"
-    args = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-            "--disable-component-update", "--no-first-run"]  # fmt: skip
     try:
-        with playwright.sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=str(CHROMIUM), args=args)
-            page = browser.new_page(viewport={"width": 1000, "height": 700})
-            page.goto(f"http://127.0.0.1:{port}/", timeout=20_000)
-            page.wait_for_selector("canvas", timeout=20_000)
-            page.wait_for_timeout(1500)
-            assert page.locator("canvas").count() >= 1
-            assert page.get_by_text("other candidates").count() >= 1
-            page.screenshot(path=str(shot))
-            browser.close()
+        page = browser.new_page(viewport={"width": 1000, "height": 700})
+        page.goto(f"http://127.0.0.1:{port}/", timeout=20_000)
+        page.wait_for_selector("canvas", timeout=20_000)
+        page.wait_for_timeout(1500)
+        assert page.locator("canvas").count() >= 1
+        assert page.get_by_text("other candidates").count() >= 1
+        page.screenshot(path=str(shot))
+        page.close()
     finally:
         scene.close()
     assert shot.stat().st_size > 5000

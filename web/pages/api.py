@@ -11,12 +11,13 @@ from __future__ import annotations
 import json
 import tempfile
 import uuid
+from datetime import timedelta
 from pathlib import Path
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, File, Form, Header, Request, Response, UploadFile
 from fastapi.concurrency import run_in_threadpool
-from fastapi.responses import FileResponse, PlainTextResponse
+from fastapi.responses import FileResponse, JSONResponse, PlainTextResponse
 from pydantic import BaseModel, Field
 from starlette.background import BackgroundTask
 
@@ -37,6 +38,7 @@ from app.core.reflect import reflect
 from app.core.storage import Storage
 from app.models import Analysis, Club, Comment, Reference, User
 from engine.errors import InvalidInput
+from web import invites
 from web.live import ViewerUnavailable, get_viewers
 from web.pages import media
 
@@ -108,6 +110,7 @@ def reference_public(ref: Reference) -> dict[str, Any]:
         "domain": validation.engine_domain(ref.domain_config or {}),
         "thumbnail": f"/web/api/references/{ref.id}/thumbnail.svg",
         "strip": f"/web/api/references/{ref.id}/strip.svg",
+        "preview": f"/web/api/references/{ref.id}/preview.json",
     }
 
 
@@ -138,6 +141,18 @@ async def reference_strip(reference_id: int, user: CurrentUser, session: Session
         int(derived.get("first_motion_frame") or 0),
     )  # fmt: skip
     return Response(svg, media_type="image/svg+xml", headers=_SVG_HEADERS)
+
+
+@router.get("/references/{reference_id}/preview.json")
+async def reference_preview(reference_id: int, user: CurrentUser, session: SessionDep):
+    """Sampled postures (front and side view) for the picker's looping preview."""
+    ref = get_reference_for(session, user, reference_id)
+    derived = ref.derived or {}
+    data = await run_in_threadpool(
+        media.reference_preview, ref.bvh_path, int(derived.get("first_motion_frame") or 0),
+        fps=float(derived.get("fps") or 0.0),
+    )  # fmt: skip
+    return JSONResponse(data, headers=_SVG_HEADERS)
 
 
 @router.post("/references", status_code=201)
@@ -379,6 +394,53 @@ def delete_comment(analysis_id: str, comment_id: int, user: CurrentUser, session
     session.delete(c)
     session.commit()
     return Response(status_code=204)
+
+
+# ---- invite links
+class InviteCreate(BaseModel):
+    display_name: str = Field(default="", max_length=200)
+    days: int = Field(default=7, ge=1, le=30)
+
+
+@router.post("/invites", status_code=201)
+def create_invite(body: InviteCreate, request: Request, user: CurrentUser, session: SessionDep):
+    """A coach's single-use link for a new performer; the token is in the answer only."""
+    require_coach(user)
+    invite, token = invites.create_invite(
+        session, club_id=user.club_id, created_by=user.id, display_name=body.display_name,
+        ttl=timedelta(days=body.days),
+    )  # fmt: skip
+    return {
+        "url": str(request.base_url).rstrip("/") + f"/join/{token}",
+        "path": f"/join/{token}",
+        "display_name": invite.display_name,
+        "expires_at": invite.expires_at.isoformat(),
+    }
+
+
+class JoinBody(BaseModel):
+    display_name: str = Field(min_length=1, max_length=200)
+    email: str = Field(min_length=3, max_length=320)
+    password: str = Field(min_length=1, max_length=1000)
+
+
+_INVITE_STATUS = {"unknown": 404, "used": 410, "expired": 410, "invalid": 422}
+
+
+@router.post("/join/{token}")
+def join(token: str, body: JoinBody, request: Request, session: SessionDep):
+    """Redeem an invite: create the performer and sign them in."""
+    try:
+        user = invites.redeem_invite(
+            session, token, display_name=body.display_name, email=body.email,
+            password=body.password,
+        )  # fmt: skip
+    except invites.InviteError as exc:
+        raise ApiError(_INVITE_STATUS[exc.reason], f"invite_{exc.reason}", str(exc)) from None
+    request.session.clear()
+    request.session["user_id"] = user.id
+    request.session["club_id"] = user.club_id
+    return {"id": user.id, "display_name": user.display_name, "url": "/upload"}
 
 
 # ---- the embedded 3D view

@@ -18,6 +18,7 @@ from app.api.errors import ApiError
 from app.api.routes.analyses import summarise_segments
 from app.core.reflect import reflect
 from app.models import ANALYSIS_STATES, User
+from web import invites
 from web.pages import api, media
 
 TEMPLATES = Jinja2Templates(directory=Path(__file__).resolve().parents[1] / "templates")
@@ -59,6 +60,22 @@ def login(request: Request, session: SessionDep, next: str = "/"):
     return _render(request, "login.html", page_user(request, session), next=safe_next)
 
 
+@router.get("/join/{token}", response_class=HTMLResponse)
+def join_page(request: Request, token: str, session: SessionDep):
+    """A performer's invite link: set a name, email and password, and be signed in."""
+    try:
+        invite = invites.find_invite(session, token)
+    except invites.InviteError as exc:
+        status = 404 if exc.reason == "unknown" else 410
+        return _render(request, "message.html", page_user(request, session), status,
+                       title="Invite link not usable", message=str(exc))  # fmt: skip
+    club = crud.get_club(session, invite.club_id)
+    return _render(
+        request, "join.html", None, invite=invite, club=club, token=token,
+        min_password=invites.MIN_PASSWORD_LEN,
+    )  # fmt: skip
+
+
 @router.get("/upload", response_class=HTMLResponse)
 def upload(request: Request, session: SessionDep):
     user = page_user(request, session)
@@ -68,7 +85,10 @@ def upload(request: Request, session: SessionDep):
         crud.list_performers(session, club_id=user.club_id, limit=1000, offset=0)
         if user.role == "coach" else []
     )  # fmt: skip
-    return _render(request, "upload.html", user, performers=performers)
+    return _render(
+        request, "upload.html", user, performers=performers,
+        max_video_bytes=request.app.state.settings.max_video_bytes,
+    )  # fmt: skip
 
 
 @router.get("/analyses/{analysis_id}", response_class=HTMLResponse)
@@ -111,10 +131,11 @@ def report_page(request: Request, analysis_id: str, session: SessionDep, notifie
     names = api.segment_names(a.reference, len(segments))
     frames = result.get("frames") or []
     comments = api.list_comment_rows(session, a)
+    stills = media.report_stills(a.video_path, a.work_dir, result)  # sync route: a threadpool
     return _render(
         request, "report.html", user, analysis=a, result=result, frames=frames,
         segments=list(zip(segments, names, strict=True)), comments=comments,
-        plot=media.error_plot_svg(result), fps=float(result["video"]["fps"]),
+        plot=media.error_plot_svg(result), fps=float(result["video"]["fps"]), stills=stills,
         mean_error=(sum(f["posture_error_deg"] for f in frames) / len(frames)) if frames else 0.0,
     )  # fmt: skip
 

@@ -152,6 +152,144 @@ def reference_strip(path: str | Path, boundaries: list[int], first_frame: int = 
     return skeleton_svg(j[frames], height=140)
 
 
+#: Postures in a reference picker's looping preview, and the longest loop (seconds).
+PREVIEW_FRAMES = 36
+PREVIEW_MAX_LOOP_S = 4.0
+
+
+def reference_preview(
+    path: str | Path, first_frame: int = 0, *, frames: int = PREVIEW_FRAMES, fps: float = 0.0
+) -> dict[str, Any]:
+    """A few dozen postures of a reference for a small looping preview, front and side view.
+
+    Coordinates are in [0, 1] with y down, one scale for both views (so proportions hold),
+    each view centred on the motion's mean hip; frames sampled evenly from the first motion
+    frame (after a T-pose) to the last.
+
+    Returns
+    -------
+    dict
+        ``{"frames": n, "fps": playback rate, "bones": [[parent, child] x 16],
+        "front": [[[u, v] x 17] x n], "side": [[[u, v] x 17] x n]}``. Front: seen from the
+        front (the body's left on the right); side: seen from the body's left (forward to the
+        left).
+    """
+    j = reference_joints(path)
+    first = min(max(int(first_frame), 0), len(j) - 1)
+    idx = np.linspace(first, len(j) - 1, max(2, min(frames, len(j) - first))).round().astype(int)
+    p = j[idx]
+    views = {
+        "front": np.stack([-p[..., 0], p[..., 1]], -1),
+        "side": np.stack([-p[..., 2], p[..., 1]], -1),
+    }
+    centre = {k: v[:, 0].mean(0) for k, v in views.items()}
+    half_x = max(float(np.abs(v[..., 0] - centre[k][0]).max()) for k, v in views.items())
+    lo_y, hi_y = float(p[..., 1].min()), float(p[..., 1].max())
+    span = max(2 * half_x, hi_y - lo_y, 1e-6) * 1.1
+    out: dict[str, Any] = {}
+    for k, v in views.items():
+        u = 0.5 + (v[..., 0] - centre[k][0]) / span
+        w = 0.5 - (v[..., 1] - (lo_y + hi_y) / 2) / span
+        out[k] = np.round(np.stack([u, w], -1), 4).tolist()
+    duration = (idx[-1] - idx[0]) / fps if fps > 0 else PREVIEW_MAX_LOOP_S
+    loop_s = min(max(duration, 1.0), PREVIEW_MAX_LOOP_S)
+    return {
+        "frames": len(idx),
+        "fps": round(len(idx) / loop_s, 3),
+        "bones": [[int(a), int(b)] for a, b in zip(BONE_PARENT, BONE_CHILD, strict=True)],
+        **out,
+    }
+
+
+# ---- report stills
+#: Stills in the printable report.
+REPORT_STILLS = 4
+
+
+def still_frames(result: dict[str, Any], n: int = REPORT_STILLS) -> list[int]:
+    """Indices into ``result["frames"]``: each segment's worst frame, then evenly spaced."""
+    frames = result.get("frames") or []
+    if not frames:
+        return []
+    t_to_i = {int(f["t"]): i for i, f in enumerate(frames)}
+    picks: list[int] = []
+    for seg in result.get("segments") or []:
+        a, b = int(seg["performer_start"]), int(seg["performer_end"])
+        inside = [t_to_i[t] for t in range(a, b + 1) if t in t_to_i]
+        worst = seg.get("worst_frame")
+        if worst is not None and int(worst) in t_to_i:
+            i = t_to_i[int(worst)]
+        elif inside:
+            i = max(inside, key=lambda k: float(frames[k]["posture_error_deg"]))
+        else:
+            continue
+        if i not in picks:
+            picks.append(i)
+    for i in np.linspace(0, len(frames) - 1, n).round().astype(int):
+        if len(picks) >= n:
+            break
+        if int(i) not in picks:
+            picks.append(int(i))
+    return sorted(picks[:n])
+
+
+def report_stills(
+    video_path: str | Path, work_dir: str | Path, result: dict[str, Any], *, n: int = REPORT_STILLS
+) -> list[dict[str, Any]]:
+    """Video frames with the selected skeleton drawn over them (bones coloured by error), as
+    JPEG data URIs for the printable report (inline, so printing needs no further requests).
+
+    Returns
+    -------
+    list of dict
+        ``{"t", "time_s", "error_deg", "src"}`` per still, in time order; empty when the video
+        cannot be read.
+    """
+    import base64
+
+    import av
+    import cv2
+
+    from engine.report import draw_skeleton
+
+    frames = result.get("frames") or []
+    picks = still_frames(result, n)
+    if not picks:
+        return []
+    wanted = {int(frames[i]["t"]): i for i in picks}
+    vw = float((result.get("video") or {}).get("width") or 0)
+    vh = float((result.get("video") or {}).get("height") or 0)
+    fps = float((result.get("video") or {}).get("fps") or 30.0)
+    out: list[dict[str, Any]] = []
+    try:
+        src = playable_video(video_path, work_dir)  # rotation applied, as the page shows it
+        with av.open(str(src)) as inp:
+            for t, frame in enumerate(inp.decode(inp.streams.video[0])):
+                if t > max(wanted):
+                    break
+                if t not in wanted:
+                    continue
+                f = frames[wanted[t]]
+                rgb = frame.to_ndarray(format="rgb24")
+                h, w = rgb.shape[:2]
+                if w > 480:  # print resolution, not the upload's
+                    h, w = round(h * 480 / w), 480
+                    rgb = cv2.resize(rgb, (w, h), interpolation=cv2.INTER_AREA)
+                j2 = np.asarray(f["joints_2d"], float) * [w / (vw or w), h / (vh or h)]
+                drawn = draw_skeleton(rgb, j2, np.asarray(f["bone_errors_deg"], float))
+                ok, buf = cv2.imencode(
+                    ".jpg", cv2.cvtColor(drawn, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 85]
+                )
+                if ok:
+                    out.append({
+                        "t": t, "time_s": t / fps, "error_deg": float(f["posture_error_deg"]),
+                        "src": "data:image/jpeg;base64," + base64.b64encode(buf.tobytes()).decode(),
+                    })  # fmt: skip
+    except Exception:  # a report without pictures beats no report
+        return out
+    return out
+
+
 # ---- exports
 def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)

@@ -12,7 +12,34 @@
   const pct = document.getElementById("upload-pct");
   let file = null;
 
+  const videoErr = document.getElementById("video-error");
+  const maxBytes = +form.dataset.maxBytes || 0;
+
   function showError(msg) { err.textContent = msg; err.hidden = false; }
+  function mb(bytes) { return (bytes / 1e6).toFixed(bytes < 1e7 ? 1 : 0) + " MB"; }
+  // A problem with the file itself: said next to the file input, and focus moved there, so a
+  // keyboard or screen-reader user lands on the control that fixes it.
+  function showVideoError(msg) {
+    videoErr.textContent = msg;
+    videoErr.hidden = false;
+    drop.classList.add("invalid");
+    input.setAttribute("aria-invalid", "true");
+    input.focus();
+  }
+  function clearErrors() {
+    err.hidden = true; videoErr.hidden = true;
+    drop.classList.remove("invalid");
+    input.removeAttribute("aria-invalid");
+  }
+  const FILE_ERRORS = ["invalid_video", "too_large", "unsupported_media_type", "video_too_long"];
+  function apiMessage(status, body) {
+    const e = body && body.error;
+    if (!e) return status === 413 ? "The video is too large." : "Upload failed (" + status + ").";
+    if (e.code === "too_large" && e.details && e.details.limit_bytes)
+      return "The video is " + mb(file.size) + "; the limit is " + mb(e.details.limit_bytes) + ". Trim it or record at a lower resolution.";
+    if (e.code === "invalid_video") return "This file cannot be analysed as a video: " + e.message + ".";
+    return e.message.charAt(0).toUpperCase() + e.message.slice(1) + ".";
+  }
 
   coach.api("/web/api/references").then(function (refs) {
     list.textContent = "";
@@ -22,22 +49,71 @@
       const segs = r.segment_names.length ? r.segment_names.join(" · ") : "one segment";
       const radio = coach.el("input", { type: "radio", name: "reference_id", value: r.id, id: id });
       if (i === 0) radio.checked = true;
+      const canvas = coach.el("canvas", { class: "ref-preview", width: 240, height: 120, role: "img",
+        "aria-label": "Looping preview of " + r.name + ": front and side view" });
       list.append(coach.el("label", { class: "ref-option", for: id }, [
         radio,
-        coach.el("img", { src: r.thumbnail, alt: "", loading: "lazy" }),
+        canvas,
         coach.el("span", { class: "name", text: r.name }),
         coach.el("span", { class: "segs", text: segs }),
         coach.el("span", { class: "segs", text: (r.duration_s ? r.duration_s.toFixed(1) + " s" : "") }),
       ]));
+      preview(canvas, r);
     });
   }).catch(function (e) { list.textContent = ""; showError(e.message); });
 
+  // A short looping preview of each reference: a few dozen sampled postures, drawn front and
+  // side by side on a canvas (no libraries); a still frame for people who prefer less motion.
+  const still = window.matchMedia && window.matchMedia("(prefers-reduced-motion: reduce)").matches;
+  function preview(canvas, r) {
+    coach.api(r.preview).then(function (p) {
+      const ctx = canvas.getContext("2d");
+      const dpr = window.devicePixelRatio || 1;
+      canvas.width = 240 * dpr; canvas.height = 120 * dpr;
+      ctx.scale(dpr, dpr);
+      function draw(i) {
+        ctx.fillStyle = "#f4f6fa"; ctx.fillRect(0, 0, 240, 120);
+        ctx.fillStyle = "#5c6675"; ctx.font = "10px system-ui, sans-serif";
+        ctx.fillText("front", 4, 11); ctx.fillText("side", 124, 11);
+        ctx.strokeStyle = "#3b5bdb"; ctx.lineWidth = 2.5; ctx.lineCap = "round";
+        [p.front[i], p.side[i]].forEach(function (j, v) {
+          ctx.beginPath();
+          p.bones.forEach(function (b) {
+            ctx.moveTo(v * 120 + j[b[0]][0] * 120, j[b[0]][1] * 120);
+            ctx.lineTo(v * 120 + j[b[1]][0] * 120, j[b[1]][1] * 120);
+          });
+          ctx.stroke();
+        });
+        canvas.dataset.frame = i;
+      }
+      canvas.dataset.ready = "true";
+      if (still) { draw(Math.floor(p.frames / 2)); return; }
+      const t0 = performance.now();
+      let shown = -1;
+      (function tick(now) {
+        // rAF's timestamp is the frame's start, which can precede t0: clamp.
+        const i = Math.floor(Math.max(now - t0, 0) / 1000 * p.fps) % p.frames;
+        if (i !== shown && canvas.isConnected) { draw(i); shown = i; }
+        if (canvas.isConnected) requestAnimationFrame(tick);
+      })(t0);
+    }).catch(function () { canvas.replaceWith(coach.el("img", { src: r.thumbnail, alt: "" })); });
+  }
+
   function choose(f) {
     if (!f) return;
-    if (f.type && !f.type.startsWith("video/")) { showError("That is not a video file."); return; }
+    clearErrors();
+    fileName.textContent = f.name + " (" + mb(f.size) + ")";
+    if (f.type && !f.type.startsWith("video/")) {
+      file = null;
+      showVideoError(f.name + " is not a video (it is " + f.type + "). Choose a video file, e.g. .mp4 or .mov.");
+      return;
+    }
+    if (maxBytes && f.size > maxBytes) {
+      file = null;
+      showVideoError("The video is " + mb(f.size) + "; the limit is " + mb(maxBytes) + ". Trim it or record at a lower resolution.");
+      return;
+    }
     file = f;
-    err.hidden = true;
-    fileName.textContent = f.name + " (" + (f.size / 1e6).toFixed(1) + " MB)";
   }
   input.addEventListener("change", function () { choose(input.files[0]); });
   ["dragenter", "dragover"].forEach(function (t) {
@@ -50,10 +126,10 @@
 
   form.addEventListener("submit", function (ev) {
     ev.preventDefault();
-    err.hidden = true;
+    clearErrors();
     const ref = form.querySelector("input[name=reference_id]:checked");
     if (!ref) { showError("Choose a reference motion first."); return; }
-    if (!file) { showError("Choose a video first."); input.focus(); return; }
+    if (!file) { showVideoError("Choose a video first."); return; }
     const data = new FormData();
     data.append("reference_id", ref.value);
     const performer = document.getElementById("performer");
@@ -77,7 +153,10 @@
         location.href = body.url;
       } else {
         button.disabled = false;
-        showError(body && body.error ? body.error.message : "Upload failed (" + xhr.status + ").");
+        prog.hidden = true;
+        const code = body && body.error ? body.error.code : (xhr.status === 413 ? "too_large" : "");
+        const msg = apiMessage(xhr.status, body);
+        if (FILE_ERRORS.indexOf(code) >= 0 || xhr.status === 413) showVideoError(msg); else showError(msg);
       }
     });
     xhr.addEventListener("error", function () { button.disabled = false; showError("The upload was interrupted; try again."); });

@@ -22,6 +22,15 @@ from engine.report import ERROR_RED_DEG, error_colors
 
 REFERENCE_RGB = (110, 130, 200)
 CANDIDATE_RGB = (190, 190, 190)
+#: Vertical field of view of the initial camera; narrower than viser's 75 deg so the
+#: figure is not stretched at the edges of a tall, narrow iframe.
+CAMERA_FOV_DEG = 50.0
+#: Initial viewing direction (from the body to the camera, world frame): in front (+z, the
+#: reference faces +z at frame 0), a little to the body's left and above, so depth is visible.
+CAMERA_DIRECTION = np.array([0.45, 0.3, 1.0])
+LABEL_LIFT = np.array([0.0, 0.25, 0.0])
+#: Fraction of the view's height the body's tallest extent fills.
+FILL = 0.8
 
 
 def _segments_of(joints: np.ndarray) -> np.ndarray:
@@ -85,9 +94,11 @@ class ViewerScene:
                 h["candidates"].points = _segments_of(others).reshape(-1, 2, 3).astype(np.float32)
             else:  # nothing to show: a degenerate segment at the hip
                 h["candidates"].points = np.repeat(sel[:1], 2, 0)[None].astype(np.float32)
-            h[
-                "label"
-            ].text = f"t'={f['t']}  t={f['reference_frame']}  eps={f['posture_error_deg']:.1f} deg"
+            label = f"t'={f['t']}  t={f['reference_frame']}  eps={f['posture_error_deg']:.1f} deg"
+            h["label"].text = label
+            top = sel[16] + LABEL_LIFT  # above the performer's head, or the expert's if higher
+            top[1] = max(sel[16, 1], ref[16, 1]) + LABEL_LIFT[1]
+            h["label"].position = tuple(float(x) for x in top)
         if "slider" in h and h["slider"].value != i:
             h["slider"].value = i
 
@@ -96,6 +107,36 @@ class ViewerScene:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=2)
+
+
+def frame_body(scene: ViewerScene) -> tuple[np.ndarray, np.ndarray, float]:
+    """Where the initial camera looks from and to, so the whole motion fills the view.
+
+    The box of every selected posture and its hip-aligned reference over all frames gives the
+    target (its centre) and the distance (its largest extent fills ``FILL`` of the vertical
+    field of view, with room for a sphere of that size in any orbit).
+
+    Returns
+    -------
+    look_at : ndarray, shape (3,)
+    position : ndarray, shape (3,)
+    floor : float
+        Lowest joint height (y), for the ground grid.
+    """
+    pts = []
+    for i in range(len(scene.frames)):
+        ref, sel, _ = scene.postures(i)
+        pts += [ref, sel]
+    p = np.concatenate(pts).reshape(-1, 3)
+    p = p[np.isfinite(p).all(1)]
+    if not len(p):
+        p = np.zeros((1, 3))
+    lo, hi = p.min(0), p.max(0)
+    look_at = (lo + hi) / 2
+    extent = float(max(np.linalg.norm(hi - lo) * 0.85, hi[1] - lo[1], 0.5))
+    distance = extent / 2 / np.tan(np.radians(CAMERA_FOV_DEG) / 2) / FILL
+    direction = CAMERA_DIRECTION / np.linalg.norm(CAMERA_DIRECTION)
+    return look_at, look_at + distance * direction, float(lo[1])
 
 
 def _legend_html() -> str:
@@ -144,7 +185,15 @@ def build_scene(
     fps = float(result.get("video", {}).get("fps", 30.0))
     scene = ViewerScene(server, ref, frames, fps, list(result.get("segments", [])))
     server.scene.set_up_direction("+y")
-    server.scene.add_grid("/ground", width=4, height=4, plane="xz", position=(0.0, 0.0, 0.0))
+    look_at, position, floor = frame_body(scene)
+    server.scene.add_grid(
+        "/ground", width=3, height=3, plane="xz", position=(look_at[0], floor, look_at[2])
+    )
+    # Every new client starts (and "Reset View" returns) close to the body, not at viser's
+    # default of 3 m out on every axis around the world origin, where a 1.7 m figure is small.
+    server.initial_camera.fov = np.radians(CAMERA_FOV_DEG)
+    server.initial_camera.look_at = tuple(look_at)
+    server.initial_camera.position = tuple(position)
     zero = np.zeros((16, 2, 3), np.float32)
     h = scene.handles
     h["candidates"] = server.scene.add_line_segments(
@@ -156,7 +205,7 @@ def build_scene(
     h["performer"] = server.scene.add_line_segments(
         "/performer", zero, np.zeros((16, 2, 3), np.uint8), thickness=8, thickness_units="screen"
     )
-    h["label"] = server.scene.add_label("/label", "", position=(0.0, 2.1, 0.0))
+    h["label"] = server.scene.add_label("/label", "", position=tuple(look_at + (0.0, 1.2, 0.0)))
     if gui:
         _add_gui(scene)
     scene.set_frame(0)

@@ -10,7 +10,6 @@ from engine.errors import InvalidInput
 from engine.types import Motion
 
 
-
 @pytest.fixture
 def motion(rng):
     shape = BodyShape.default(1.8)
