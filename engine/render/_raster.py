@@ -655,3 +655,107 @@ def part_counts(
         out_i[n, 3] = nh
         out_f[n, 0] = se
         out_f[n, 1] = sh
+
+
+# ----------------------------------------------------------------------------- width-robust
+
+
+@njit(cache=True, inline="always")
+def _sample_sd(sd: np.ndarray, u: float, v: float) -> float:
+    """Bilinear signed distance at (u, v); beyond the image, the border value minus the way out."""
+    H, W = sd.shape
+    uc = min(max(u, 0.0), W - 1.0)
+    vc = min(max(v, 0.0), H - 1.0)
+    away = math.hypot(u - uc, v - vc)
+    c0 = min(int(uc), W - 2) if W > 1 else 0
+    r0 = min(int(vc), H - 2) if H > 1 else 0
+    fu = uc - c0
+    fv = vc - r0
+    c1 = min(c0 + 1, W - 1)
+    r1 = min(r0 + 1, H - 1)
+    val = (1 - fv) * ((1 - fu) * sd[r0, c0] + fu * sd[r0, c1]) + fv * (
+        (1 - fu) * sd[r1, c0] + fu * sd[r1, c1]
+    )
+    return val - away
+
+
+@njit(cache=True)
+def width_costs(
+    ends: np.ndarray,
+    rad: np.ndarray,
+    cap_part: np.ndarray,
+    n_parts: int,
+    sd: np.ndarray,
+    deep_k: float,
+    sigma_out: float,
+    out_cap: float,
+    n_pts: int,
+    cover: np.ndarray,
+    inflate: float,
+    inflate_px: float,
+    tau: float,
+    out_center: np.ndarray,
+    out_cover: np.ndarray,
+    out_part: np.ndarray,
+) -> None:
+    """Centreline and coverage terms of the width-robust likelihood (see capsules.py).
+
+    ends (N, C, 2, 2) capsule axis ends (u, v) px; rad (C,) px; sd (H, W) signed distance to
+    the silhouette contour (+ inside); cover (M, 2) silhouette points (u, v). Writes
+    out_center (N,), out_cover (N,), out_part (N, n_parts).
+    """
+    N = ends.shape[0]
+    C = ends.shape[1]
+    M = cover.shape[0]
+    psum = np.zeros(n_parts)
+    pcnt = np.zeros(n_parts)
+    for n in range(N):
+        psum[:] = 0.0
+        pcnt[:] = 0.0
+        for c in range(C):
+            ax = ends[n, c, 0, 0]
+            ay = ends[n, c, 0, 1]
+            bx = ends[n, c, 1, 0]
+            by = ends[n, c, 1, 1]
+            deep = max(deep_k * rad[c], 0.5)
+            p = cap_part[c]
+            for i in range(n_pts):
+                t = i / (n_pts - 1.0) if n_pts > 1 else 0.5
+                s = _sample_sd(sd, ax + t * (bx - ax), ay + t * (by - ay))
+                if s >= deep:
+                    cost = 0.0
+                elif s >= 0.0:
+                    cost = 1.0 - s / deep
+                else:
+                    cost = min(1.0 - s / sigma_out, out_cap)
+                psum[p] += cost
+                pcnt[p] += 1.0
+        tot = 0.0
+        k = 0
+        for p in range(n_parts):
+            if pcnt[p] > 0:
+                out_part[n, p] = psum[p] / pcnt[p]
+                tot += out_part[n, p]
+                k += 1
+        out_center[n] = tot / max(k, 1)
+        miss = 0.0
+        for m in range(M):
+            qx = cover[m, 0]
+            qy = cover[m, 1]
+            best = _INF
+            for c in range(C):
+                ax = ends[n, c, 0, 0]
+                ay = ends[n, c, 0, 1]
+                dx = ends[n, c, 1, 0] - ax
+                dy = ends[n, c, 1, 1] - ay
+                ll = dx * dx + dy * dy
+                t = ((qx - ax) * dx + (qy - ay) * dy) / ll if ll > 1e-12 else 0.0
+                t = min(max(t, 0.0), 1.0)
+                d = math.hypot(qx - ax - t * dx, qy - ay - t * dy) - (inflate * rad[c] + inflate_px)
+                if d < best:
+                    best = d
+                    if best <= 0.0:
+                        break
+            if best > 0.0:
+                miss += min(best / tau, 1.0)
+        out_cover[n] = miss / max(M, 1)

@@ -644,3 +644,135 @@ class PartScorer:
         s_e = fx.sum_edge + out_f[:, 0] - out_f[:, 1]
         dE = _d_E(s_e, n_e, t.xi)
         return self.lambda_A * dA + self.lambda_E * dE
+
+
+# ----------------------------------------------------------------------------- width-robust
+
+
+@dataclass(frozen=True)
+class WidthTarget:
+    """The body region prepared for the width-robust likelihood (beyond the thesis).
+
+    Attributes
+    ----------
+    signed_distance : ndarray of float64, shape (H, W)
+        Distance to the silhouette contour in pixels, positive inside (DT_in), negative
+        outside (-DT_out) (``cv2.distanceTransform``, exact L2).
+    cover_uv : ndarray, shape (M, 2)
+        Silhouette pixels (u, v) on a regular grid, the points the coverage term must explain.
+    """
+
+    signed_distance: np.ndarray
+    cover_uv: np.ndarray
+
+    @classmethod
+    def from_mask(cls, silhouette: np.ndarray, *, max_cover_points: int = 500) -> WidthTarget:
+        """Distance transforms and coverage points of a silhouette (H, W).
+
+        Raises
+        ------
+        InvalidInput
+            A silhouette that is not 2D or ``max_cover_points`` < 1.
+        """
+        import cv2
+
+        sil = np.asarray(silhouette).astype(bool)
+        if sil.ndim != 2:
+            raise InvalidInput(f"silhouette must be a 2D (H, W) mask, got shape {sil.shape}")
+        if max_cover_points < 1:
+            raise InvalidInput(f"max_cover_points must be >= 1, got {max_cover_points}")
+        m = sil.astype(np.uint8)
+        dt_in = cv2.distanceTransform(m, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+        dt_out = cv2.distanceTransform(1 - m, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+        sd = np.where(sil, dt_in, -dt_out).astype(np.float64)
+        n = int(sil.sum())
+        step = max(1, int(np.ceil(np.sqrt(n / max_cover_points))))
+        rr, cc = np.nonzero(sil[::step, ::step])
+        cover = np.stack([cc * step, rr * step], axis=1).astype(np.float64)
+        return cls(np.ascontiguousarray(sd), np.ascontiguousarray(cover))
+
+
+_CAP_PART_I64 = np.ascontiguousarray(CAPSULE_PART.astype(np.int64))
+
+
+def width_robust_terms(
+    joints: np.ndarray,
+    target: WidthTarget,
+    shape: BodyShape,
+    camera: Camera,
+    *,
+    deep_k: float = 0.5,
+    sigma_out_px: float = 3.0,
+    out_cap: float = 2.0,
+    points_per_capsule: int = 7,
+    inflate: float = 1.3,
+    inflate_px: float = 1.0,
+    cover_tau_px: float = 4.0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Centreline and coverage terms of many postures (beyond the thesis, cf. 4.4.1).
+
+    A clothed body is wider than the capsules in places and the foreground misses dark shoes
+    or hair, so d_A's optimum moves bones to fill the region. These terms ignore width:
+
+    centreline
+        ``points_per_capsule`` points along each projected capsule axis, each costing 0 when
+        deeper inside the silhouette than ``deep_k`` times its capsule's radius, rising to 1
+        at the contour and 1 + d_out / ``sigma_out_px`` outside, capped at ``out_cap`` (a part
+        the foreground missed entirely pulls nothing); averaged per part, then
+        over parts (a forearm counts as much as the torso).
+    coverage
+        Mean over silhouette grid points of min(1, d / ``cover_tau_px``) where d is how far
+        the point lies outside every capsule inflated to ``inflate`` r + ``inflate_px``: the
+        region unexplained by the body (an arm sticking out must be matched).
+
+    Parameters
+    ----------
+    joints : ndarray, shape (N, 17, 3)
+    target : WidthTarget
+    shape : BodyShape
+    camera : Camera
+
+    Returns
+    -------
+    centreline : ndarray, shape (N,)
+    coverage : ndarray, shape (N,)
+    per_part : ndarray, shape (N, 12)
+        Centreline cost of each part.
+
+    Raises
+    ------
+    InvalidInput
+        Bad ``joints`` or a target whose size differs from the camera's image.
+    """
+    j = _check_joints(joints, "joints", batch=True)
+    if target.signed_distance.shape != (camera.height, camera.width):
+        raise InvalidInput(
+            f"target is {target.signed_distance.shape}, camera image is "
+            f"{(camera.height, camera.width)}"
+        )
+    pc = _project(j, shape, camera)
+    n = j.shape[0]
+    center, cover = np.empty(n), np.empty(n)
+    per_part = np.zeros((n, N_PARTS))
+    _raster.width_costs(
+        pc.ends_px, np.ascontiguousarray(pc.radius_px), _CAP_PART_I64, N_PARTS,
+        target.signed_distance, float(deep_k), float(sigma_out_px), float(out_cap),
+        int(points_per_capsule),
+        target.cover_uv, float(inflate), float(inflate_px), float(cover_tau_px),
+        center, cover, per_part,
+    )  # fmt: skip
+    return center, cover, per_part
+
+
+def width_robust_cost(
+    joints: np.ndarray,
+    target: WidthTarget,
+    shape: BodyShape,
+    camera: Camera,
+    *,
+    coverage_weight: float = 1.0,
+    **kwargs: float,
+) -> np.ndarray:
+    """centreline + ``coverage_weight`` coverage of :func:`width_robust_terms`, shape (N,)."""
+    c, v, _ = width_robust_terms(joints, target, shape, camera, **kwargs)
+    return c + coverage_weight * v

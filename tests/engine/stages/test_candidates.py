@@ -146,3 +146,8 @@ def test_bp_prior_keeps_the_estimate_near_the_reference_under_model_mismatch() -
         )
         err[mu] = float(d_B(fc.candidates[0], truth))
     assert err[2.0] < err[0.0]
+
+
+def test_estimator_must_be_known():
+    with pytest.raises(InvalidInput, match="estimator"):
+        CandidateSettings(estimator="nope").validate()
