@@ -45,7 +45,8 @@ def main() -> None:
     a = ap.parse_args()
     case = Path(a.case)
     ref = load_reference(case / "reference.bvh")
-    truth = np.array([f["reference_frame"] for f in json.loads((case / "truth.json").read_text())["frames"]])
+    frames = json.loads((case / "truth.json").read_text())["frames"]
+    truth = np.array([f["reference_frame"] for f in frames])
     video = read_video(case / "video.mp4")
     fg = extract_foreground(video.frames)
     c0 = ref.motion.first_motion_frame

@@ -13,9 +13,9 @@ from the expert:
 - a fixed scaled orthographic camera (2.1.3 item 1) framing the body at ~80 % of the image
   height, a textured static background and Gaussian sensor noise.
 
-The reference at the fractional frame C(t') is :func:`engine.io.bvh.sample_reference` (slerp of the file's local
-rotations), the same sampling the truth's bone errors are measured against. Every random
-choice comes from the ``rng`` passed in.
+The reference at the fractional frame C(t') is :func:`engine.io.bvh.sample_reference`
+(slerp of the file's local rotations), the same sampling the truth's bone errors are
+measured against. Every random choice comes from the ``rng`` passed in.
 """
 
 from __future__ import annotations
@@ -556,7 +556,8 @@ def _truth(
         f"about their root joints (smooth ramp {settings.ramp:g} of the segment), yaw "
         f"{settings.yaw_deg:g} deg. World frame = the reference's (metres, y up, facing +z at "
         f"reference frame 0). reference_frame = true fractional C(t'); bone_errors_deg = "
-        f"angle to the reference sampled at that frame (engine.io.bvh.sample_reference, slerp of the file's rotations). "
+        "angle to the reference sampled at that frame (engine.io.bvh.sample_reference, "
+        "slerp of the file's rotations). "
         f"joints_2d = exact projection of joints_3d by the camera (pixel centres on integers). "
         f"Video frame 0 is pinned to reference frame {bounds[0]} (the first motion frame)."
     )

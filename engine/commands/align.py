@@ -15,11 +15,15 @@ import numpy as np
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("align", help="temporal alignment of a video to a BVH reference (stages 0-2)")
+    p = sub.add_parser(
+        "align", help="temporal alignment of a video to a BVH reference (stages 0-2)"
+    )
     p.add_argument("reference", type=Path, help="reference motion, BVH")
     p.add_argument("video", type=Path, help="performer's video")
     p.add_argument("--out", type=Path, required=True, help="result JSON")
-    p.add_argument("--plot", type=Path, help="PNG of the cost matrix with the path (thesis fig. 5.1)")
+    p.add_argument(
+        "--plot", type=Path, help="PNG of the cost matrix with the path (thesis fig. 5.1)"
+    )
     p.add_argument("--k", type=float, default=10.0, help="window factor k (w = kL/L')")
     p.add_argument("--band", type=float, default=0.25, help="band half-width beta/L")
     p.add_argument("--float-ends", type=int, default=0, help="let C(0), C(L') float (frames)")
@@ -59,8 +63,9 @@ def run(args: argparse.Namespace) -> int:
     video = read_video(args.video) if args.max_frames is None else \
         read_video(args.video, max_frames=args.max_frames)  # fmt: skip
     t_video = time.perf_counter() - t0
-    settings = AlignmentSettings(k=args.k, band_fraction=args.band,
-                                 float_start=args.float_ends, float_end=args.float_ends)  # fmt: skip
+    settings = AlignmentSettings(
+        k=args.k, band_fraction=args.band, float_start=args.float_ends, float_end=args.float_ends
+    )
     st = run_stages_0_2_full(ref, video, alignment=settings)
     fg, camera, res, timing = st.foreground, st.camera, st.alignment, st.timing_s
     timing = {"read_reference": t_ref, "read_video": t_video, **timing}

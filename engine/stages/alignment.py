@@ -226,11 +226,15 @@ def dp_path(
     if not isinstance(window, int | np.integer) or window < 1:
         raise InvalidInput(f"window must be an integer >= 1, got {window!r}")
     if not (0 <= start <= end < n_r):
-        raise InvalidInput(f"start and end must satisfy 0 <= start <= end < {n_r}, got {start}, {end}")
+        raise InvalidInput(
+            f"start and end must satisfy 0 <= start <= end < {n_r}, got {start}, {end}"
+        )
     if min_step not in (0, 1):
         raise InvalidInput(f"min_step must be 0 or 1, got {min_step!r}")
     if float_start < 0 or float_end < 0:
-        raise InvalidInput(f"float_start and float_end must be >= 0, got {float_start}, {float_end}")
+        raise InvalidInput(
+            f"float_start and float_end must be >= 0, got {float_start}, {float_end}"
+        )
     if step_cost is None:
         g = np.zeros(window + 1)
     else:
