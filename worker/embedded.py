@@ -83,6 +83,7 @@ def start(
         stderr=subprocess.STDOUT,
         cwd=root,
         start_new_session=True,  # stop() signals the worker and its pool children together
+        preexec_fn=_die_with_parent,
     )
     log.info(
         "worker.embedded_started pid=%s data_dir=%s broker=%s",
@@ -91,6 +92,21 @@ def start(
         settings.broker_url,
     )
     return _process
+
+
+def _die_with_parent() -> None:
+    """In the child before exec: get SIGTERM when the server process dies (Linux).
+
+    stop() covers a clean shutdown; this covers a killed server, which would otherwise leave
+    an orphan worker consuming the queue. Elsewhere the call is skipped.
+    """
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL("libc.so.6", use_errno=True)
+        libc.prctl(1, signal.SIGTERM)  # 1 = PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
 
 
 def running() -> bool:
