@@ -25,4 +25,5 @@ test: setup
 	PYOPENGL_PLATFORM=egl $(PY) -m pytest -q -p no:cacheprovider
 
 lint: setup
-	$(VENV)/bin/ruff check engine app worker tests benchmarks
+	$(VENV)/bin/ruff check engine app worker web tests benchmarks
+	$(VENV)/bin/mypy

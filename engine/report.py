@@ -134,7 +134,7 @@ def _error_plot_png(result: dict[str, Any]) -> str:
 
 def build_report_html(
     result: dict[str, Any],
-    video_frames: Sequence[np.ndarray] | None = None,
+    video_frames: np.ndarray | Sequence[np.ndarray] | None = None,
     *,
     strip_frames: int = 8,
 ) -> str:
@@ -144,7 +144,7 @@ def build_report_html(
     ----------
     result : dict
         A result document (:func:`engine.io.result.build_result`).
-    video_frames : sequence of ndarray of uint8, shape (H, W, 3), optional
+    video_frames : ndarray of uint8, shape (T, H, W, 3), or sequence of (H, W, 3), optional
         RGB frames indexed like ``result["frames"]``; without them the strip shows the
         skeletons on a grey background.
     strip_frames : int

@@ -58,8 +58,12 @@ _PRIMARY_BONE = np.array([0, 7, 14, 15, 9, 10, 12, 13, 1, 2, 4, 5])
 class ReferenceLike(Protocol):
     """What :func:`synthesize` needs of a reference (e.g. :class:`engine.io.bvh.Reference`)."""
 
-    motion: Motion
-    shape: BodyShape
+    # read-only: a frozen dataclass (engine.io.bvh.Reference) must satisfy the protocol
+    @property
+    def motion(self) -> Motion: ...
+
+    @property
+    def shape(self) -> BodyShape: ...
 
 
 @dataclass(frozen=True)
@@ -395,7 +399,7 @@ def synthesize(
     InvalidInput
         A reference that is too short, segments outside it, fps above the reference's.
     """
-    from engine.io.bvh import sample_at, sample_reference
+    from engine.io.bvh import Reference, sample_at, sample_reference
     from engine.render.mesh import MeshRenderer, textured_background
 
     motion, shape = reference.motion, reference.shape
@@ -423,7 +427,7 @@ def synthesize(
         warp = warp[: settings.max_frames]
     # the file's own rotations interpolated, as the public truth does (rigid-part slerp
     # would bend CMU's spine and hips by up to 20 deg)
-    if getattr(reference, "bvh", None) is not None:
+    if isinstance(reference, Reference):
         ref = sample_reference(reference, warp)  # (T', 17, 3)
     else:  # a reference built in memory (no file): interpolate on the 17-joint body
         ref = sample_at(motion, shape, warp)

@@ -145,10 +145,10 @@ def resolve(source_names: tuple[str, ...]) -> tuple[dict[str, int], tuple[str, .
         used: set[int] = set()
         for joint in RESOLVE_ORDER:
             for cand in _candidates(profile, joint):
-                i = index.get(cand)
-                if i is not None and i not in used:
-                    found[joint] = i
-                    used.add(i)
+                k = index.get(cand)
+                if k is not None and k not in used:
+                    found[joint] = k
+                    used.add(k)
                     break
         missing = tuple(j for j in JOINTS if j not in found)
         if not missing:

@@ -277,12 +277,12 @@ def _parse_hierarchy(lines: list[str], start: int, name: str):
             if not stack or ends[stack[-1]]:
                 raise _err(name, i, "CHANNELS outside of a joint")
             try:
-                n = int(tokens[1])
+                n_chans = int(tokens[1])
             except (IndexError, ValueError):
                 raise _err(name, i, "CHANNELS needs a count") from None
             chans = tokens[2:]
-            if n != len(chans):
-                raise _err(name, i, f"CHANNELS says {n} channels but lists {len(chans)}")
+            if n_chans != len(chans):
+                raise _err(name, i, f"CHANNELS says {n_chans} channels but lists {len(chans)}")
             canon = {c.lower(): c for c in _CHANNELS}
             bad = [c for c in chans if c.lower() not in canon]
             if bad:

@@ -81,7 +81,7 @@ def _write_opencv(path: Path, frames: np.ndarray, fps: float) -> None:
     import cv2
 
     H, W = frames.shape[1:3]
-    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), float(fps), (W, H))
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter.fourcc(*"mp4v"), float(fps), (W, H))
     if not writer.isOpened():
         raise InvalidInput(f"cannot open {path} for writing")
     try:

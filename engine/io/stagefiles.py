@@ -11,7 +11,7 @@ import json
 import os
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import IO, Any, Protocol, cast
 
 import numpy as np
 
@@ -20,10 +20,22 @@ from engine.errors import InvalidInput
 _META = "__meta__"
 
 
+class _SaveNamedArrays(Protocol):
+    def __call__(self, file: IO[bytes], /, **arrays: np.ndarray) -> None: ...
+
+
+# np.savez_compressed stores keyword arguments as named arrays, but numpy >= 2.1 also has an
+# ``allow_pickle`` keyword, so its stubs (rightly) refuse **dict[str, ndarray]. save_arrays
+# rejects that name, so here every keyword is an array: the narrower signature is exact.
+_savez_named = cast(_SaveNamedArrays, np.savez_compressed)
+
+
 def save_arrays(
     path: str | os.PathLike, arrays: dict[str, np.ndarray], meta: dict[str, Any]
 ) -> Path:
     """Write named arrays and a JSON-able header to ``path`` atomically."""
+    if "allow_pickle" in arrays:
+        raise ValueError("arrays: 'allow_pickle' is not a valid array name (numpy keyword)")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     payload = dict(arrays)
@@ -31,7 +43,7 @@ def save_arrays(
     fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as fh:
-            np.savez_compressed(fh, **payload)
+            _savez_named(fh, **payload)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

@@ -22,6 +22,7 @@ joint they end at (``"l_elbow"`` = upper arm ``l_shoulder->l_elbow``). Unnamed b
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -184,13 +185,13 @@ def parse_domain(doc: Any, *, n_segments: int | None = None, source: str = "doma
     )  # fmt: skip
 
 
-def domain_path(reference_path: str | Path) -> Path:
+def domain_path(reference_path: str | os.PathLike[str]) -> Path:
     """``swing.bvh`` -> ``swing.domain.json`` in the same folder."""
     p = Path(reference_path)
     return p.with_name(p.stem + ".domain.json")
 
 
-def load_domain(path: str | Path, *, n_segments: int | None = None) -> Domain:
+def load_domain(path: str | os.PathLike[str], *, n_segments: int | None = None) -> Domain:
     """Read and validate a domain file.
 
     Raises
@@ -208,7 +209,9 @@ def load_domain(path: str | Path, *, n_segments: int | None = None) -> Domain:
     return parse_domain(doc, n_segments=n_segments, source=str(p))
 
 
-def find_domain(reference_path: str | Path, *, n_segments: int | None = None) -> Domain | None:
+def find_domain(
+    reference_path: str | os.PathLike[str], *, n_segments: int | None = None
+) -> Domain | None:
     """The domain file beside a reference, or None when there is none."""
     p = domain_path(reference_path)
     return load_domain(p, n_segments=n_segments) if p.exists() else None

@@ -17,8 +17,21 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from functools import cached_property
+from typing import TypedDict, Unpack
 
 import numpy as np
+
+
+class CameraChanges(TypedDict, total=False):
+    """Fields :meth:`Camera.with_` may change, with their types."""
+
+    scale: float
+    theta_z: float
+    cx: float
+    cy: float
+    azimuth: float
+    width: int
+    height: int
 
 
 @dataclass(frozen=True)
@@ -78,7 +91,7 @@ class Camera:
         """Depth along the viewing direction (larger is farther), (..., 3) -> (...)."""
         return np.asarray(points, dtype=float) @ self.view_dir
 
-    def with_(self, **changes: float) -> Camera:
+    def with_(self, **changes: Unpack[CameraChanges]) -> Camera:
         """A copy with some fields changed."""
         return replace(self, **changes)
 

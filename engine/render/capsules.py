@@ -33,6 +33,7 @@ of the moving part touching only that part's bounding box.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TypedDict, Unpack
 
 import numpy as np
 
@@ -239,7 +240,7 @@ def _render_caps(
     )
 
 
-def _check_box(box: tuple[int, int, int, int] | None, camera: Camera) -> tuple[int, ...]:
+def _check_box(box: tuple[int, int, int, int] | None, camera: Camera) -> tuple[int, int, int, int]:
     if box is None:
         return (0, camera.height, 0, camera.width)
     try:
@@ -764,6 +765,18 @@ def width_robust_terms(
     return center, cover, per_part
 
 
+class WidthTermOptions(TypedDict, total=False):
+    """Keyword options of :func:`width_robust_terms` (see there for meaning and defaults)."""
+
+    deep_k: float
+    sigma_out_px: float
+    out_cap: float
+    points_per_capsule: int
+    inflate: float
+    inflate_px: float
+    cover_tau_px: float
+
+
 def width_robust_cost(
     joints: np.ndarray,
     target: WidthTarget,
@@ -771,7 +784,7 @@ def width_robust_cost(
     camera: Camera,
     *,
     coverage_weight: float = 1.0,
-    **kwargs: float,
+    **kwargs: Unpack[WidthTermOptions],
 ) -> np.ndarray:
     """centreline + ``coverage_weight`` coverage of :func:`width_robust_terms`, shape (N,)."""
     c, v, _ = width_robust_terms(joints, target, shape, camera, **kwargs)

@@ -129,7 +129,8 @@ def run_stages_0_2_full(
     k = calibration.video_frame
     camera, _ = calibrate(joints[c0], reference.shape, fg.silhouettes[k], fg.edges[k],
                           calibration, on_progress=on_progress)  # fmt: skip
-    shape, factors = reference.shape, {}
+    shape = reference.shape
+    factors: dict[str, float] = {}
     if calibration.fit_width:
         shape, factors = fit_body_shape(joints[c0], reference.shape, camera, fg.silhouettes[k])
     timing["calibration"] = time.perf_counter() - t0

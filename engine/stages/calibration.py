@@ -228,7 +228,7 @@ def _refine_above_ankles(
         m = capsules.silhouettes(joints[None], shape, c)[0][:cut]
         t = silhouette[:cut]
         inter = np.count_nonzero(m & t)
-        return 1.0 - 2.0 * inter / max(np.count_nonzero(m) + np.count_nonzero(t), 1)
+        return 1.0 - 2.0 * inter / max(int(np.count_nonzero(m) + np.count_nonzero(t)), 1)
 
     best = score(cam)
     for step_px in (4.0, 2.0, 1.0, 0.5):

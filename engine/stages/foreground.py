@@ -32,8 +32,9 @@ background pixels were never seen.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import cv2
 import numpy as np
@@ -42,6 +43,10 @@ from scipy import ndimage
 from engine.errors import InvalidInput
 
 ProgressFn = Callable[[str, float], None]
+
+# GrabCut seeded from a mask (GC_INIT_WITH_MASK) takes no rectangle. OpenCV's stubs type
+# ``rect`` as Sequence[int] only, but the binding accepts None for it (cv::Rect()).
+_NO_RECT = cast(Sequence[int], None)
 
 
 @dataclass(frozen=True)
@@ -309,7 +314,7 @@ def _grabcut_full_height(
         return coarse
     bgd, fgd = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
     try:
-        cv2.grabCut(img, gc, None, bgd, fgd, 3, cv2.GC_INIT_WITH_MASK)
+        cv2.grabCut(img, gc, _NO_RECT, bgd, fgd, 3, cv2.GC_INIT_WITH_MASK)
     except cv2.error:
         return coarse
     m = ((gc == cv2.GC_FGD) | (gc == cv2.GC_PR_FGD)).astype(np.uint8)
@@ -320,7 +325,7 @@ def _clean(
     mask: np.ndarray, min_blob_fraction: float, sure_bg: np.ndarray | None = None
 ) -> tuple[np.ndarray, int]:
     """Open, close, drop small blobs, fill holes; returns the mask and the blob count."""
-    m = mask.astype(np.uint8)
+    m: np.ndarray = mask.astype(np.uint8)
     m = cv2.morphologyEx(m, cv2.MORPH_OPEN, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3)))
     m = cv2.morphologyEx(m, cv2.MORPH_CLOSE, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5)))
     n, labels, stats, _ = cv2.connectedComponentsWithStats(m, connectivity=8)
@@ -387,7 +392,7 @@ def grabcut_seeded(frame: np.ndarray, labels: np.ndarray, *, iterations: int = 2
         return fallback
     bgd, fgd = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
     try:
-        cv2.grabCut(np.ascontiguousarray(frame[..., ::-1]), gc, None, bgd, fgd, iterations,
+        cv2.grabCut(np.ascontiguousarray(frame[..., ::-1]), gc, _NO_RECT, bgd, fgd, iterations,
                     cv2.GC_INIT_WITH_MASK)  # fmt: skip
     except cv2.error:  # degenerate colour model (e.g. uniform crop): keep the trimap
         return fallback

@@ -624,8 +624,8 @@ def select_and_refine(
         if i > 0:
             flags[ps].append("segment_boundary" if found[i] else "segment_boundary_estimated")
         if status[i] != "ok":
-            for t in range(ps, pe + 1):
-                flags[t].append(f"{status[i]}_segment")
+            for frame in range(ps, pe + 1):
+                flags[frame].append(f"{status[i]}_segment")
         worst = ps + int(np.argmax(eps[sl]))
         reports.append(
             SegmentReport(
