@@ -4,6 +4,12 @@ Each analysis gets its own :class:`viser.ViserServer` (so many viewers can look 
 analyses at once); the page embeds it in an iframe and moves its frame through
 :meth:`LiveViewers.set_frame` as the video plays. Servers idle for ``idle_s`` seconds, or
 beyond ``max_servers``, are stopped (least recently used first).
+
+While an analysis runs, :meth:`LiveViewers.ensure_running` starts its server with the partial
+scene of :mod:`web.viewer.partial` as soon as stage 2's output exists; a watcher thread polls
+the analysis folder every ``poll_s`` seconds, draws stage-3 candidates as their chunk files
+appear, and swaps in the finished, coloured scene on the same server once result.json exists
+(or when :meth:`LiveViewers.ensure` is asked for the finished analysis first).
 """
 
 from __future__ import annotations
@@ -13,7 +19,8 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 log = logging.getLogger("web.live")
@@ -23,19 +30,39 @@ class ViewerUnavailable(Exception):
     """The 3D view cannot be served (viser or the scene builder is missing, or it failed)."""
 
 
+class NothingToShowYet(Exception):
+    """A running analysis has no stage-2 output yet: nothing to draw."""
+
+
 @dataclass
 class _Live:
     server: Any
     scene: Any
     port: int
     last_used: float
+    #: While the analysis runs: what its folder holds (web.viewer.partial.FolderState).
+    state: Any = None
+    lock: threading.RLock = field(default_factory=threading.RLock)
+    stop: threading.Event = field(default_factory=threading.Event)
+
+    @property
+    def partial(self) -> bool:
+        return self.state is not None
 
 
 class LiveViewers:
     """The running viser servers, one per analysis id."""
 
-    def __init__(self, *, host: str = "127.0.0.1", max_servers: int = 8, idle_s: float = 900.0):
+    def __init__(
+        self,
+        *,
+        host: str = "127.0.0.1",
+        max_servers: int = 8,
+        idle_s: float = 900.0,
+        poll_s: float = 0.5,
+    ):
         self.host = host
+        self.poll_s = poll_s
         self.max_servers = max_servers
         self.idle_s = idle_s
         self._live: dict[str, _Live] = {}
@@ -51,6 +78,10 @@ class LiveViewers:
             live = self._live.get(analysis_id)
             if live is not None:
                 live.last_used = time.monotonic()
+                if live.partial:  # the analysis finished before the watcher saw it
+                    with live.lock:
+                        if live.partial:
+                            self._finish(live, *load())
                 return live.port
             self._evict_locked()
             live = self._start(load)
@@ -58,9 +89,50 @@ class LiveViewers:
             log.info("live.started analysis=%s port=%d", analysis_id, live.port)
             return live.port
 
+    def ensure_running(self, analysis_id: str, work_dir: str | Path) -> tuple[int, dict[str, Any]]:
+        """The port of a running analysis' viewer and what it shows (``FolderState.public``).
+
+        Starts the server with the partial scene once stage 2's output exists; raises
+        :class:`NothingToShowYet` before that.
+        """
+        with self._lock:
+            live = self._live.get(analysis_id)
+            if live is not None:
+                live.last_used = time.monotonic()
+                return live.port, self._public(live)
+            try:
+                from web.viewer.partial import FolderState, refresh
+            except ImportError as exc:
+                raise ViewerUnavailable(f"the 3D viewer is not installed ({exc})") from exc
+            state = FolderState()
+            refresh(state, work_dir)
+            if state.aligned is None:
+                raise NothingToShowYet("stage 2 has not finished yet")
+            self._evict_locked()
+            live = self._start_partial(state)
+            self._live[analysis_id] = live
+            threading.Thread(
+                target=self._watch, args=(analysis_id, live, Path(work_dir)),
+                name=f"viewer-watch-{analysis_id[:8]}", daemon=True,
+            ).start()  # fmt: skip
+            log.info("live.started_partial analysis=%s port=%d", analysis_id, live.port)
+            return live.port, self._public(live)
+
+    def state(self, analysis_id: str) -> dict[str, Any] | None:
+        """What the analysis' viewer shows now, or None if it has none."""
+        live = self._live.get(analysis_id)
+        return None if live is None else self._public(live)
+
+    @staticmethod
+    def _public(live: _Live) -> dict[str, Any]:
+        if live.partial:
+            return live.state.public()
+        n = len(live.scene.frames)
+        return {"phase": "done", "frames_done": n, "frames": n}
+
     def set_frame(self, analysis_id: str, frame: int) -> bool:
         live = self._live.get(analysis_id)
-        if live is None:
+        if live is None or live.partial:
             return False
         live.last_used = time.monotonic()
         n = len(live.scene.frames)
@@ -69,21 +141,12 @@ class LiveViewers:
 
     def _start(self, load: Callable[[], tuple[Any, dict[str, Any]]]) -> _Live:
         try:
-            import viser
-
-            from web.viewer.scene import build_scene, free_port, wait_until_listening
+            from web.viewer.scene import build_scene, wait_until_listening
         except ImportError as exc:
             raise ViewerUnavailable(f"the 3D viewer is not installed ({exc})") from exc
         reference_joints, result = load()
-        port = free_port()
-        server = viser.ViserServer(host=self.host, port=port, verbose=False)
+        server, port = self._new_server()
         try:
-            # Embedded beside the video, the panel starts minimised to its title bar so the
-            # scene has the whole frame (the page shows the legend and drives the frame); no
-            # logo or share link. viser 1.1 deprecates control_layout for main_panel placement.
-            server.gui.configure_theme(
-                control_width="small", show_logo=False, show_share_button=False
-            )
             scene = build_scene(server, reference_joints, result)
             server.gui.main_panel.minimize()
             wait_until_listening(port)
@@ -91,6 +154,62 @@ class LiveViewers:
             server.stop()
             raise ViewerUnavailable(f"the 3D view could not be built ({exc})") from exc
         return _Live(server, scene, port, time.monotonic())
+
+    def _new_server(self) -> tuple[Any, int]:
+        import viser
+
+        from web.viewer.scene import free_port
+
+        port = free_port()
+        server = viser.ViserServer(host=self.host, port=port, verbose=False)
+        # Embedded beside the video, the panel starts minimised to its title bar (the caller
+        # minimises it once its GUI is added) so the scene has the whole frame; no logo or
+        # share link. viser 1.1 deprecates control_layout for main_panel placement.
+        server.gui.configure_theme(control_width="small", show_logo=False, show_share_button=False)
+        return server, port
+
+    def _start_partial(self, state: Any) -> _Live:
+        from web.viewer.partial import PartialScene
+        from web.viewer.scene import wait_until_listening
+
+        server, port = self._new_server()
+        try:
+            scene = PartialScene(server)
+            scene.build(state)
+            server.gui.main_panel.minimize()
+            wait_until_listening(port)
+        except Exception as exc:
+            server.stop()
+            raise ViewerUnavailable(f"the 3D view could not be built ({exc})") from exc
+        return _Live(server, scene, port, time.monotonic(), state=state)
+
+    def _finish(self, live: _Live, reference_joints: Any, result: dict[str, Any]) -> None:
+        """Replace the partial scene by the finished one, on the same server (lock held)."""
+        from web.viewer.scene import build_scene
+
+        live.stop.set()
+        live.scene.remove()
+        live.scene = build_scene(live.server, reference_joints, result)
+        live.state = None
+
+    def _watch(self, analysis_id: str, live: _Live, work_dir: Path) -> None:
+        """Poll the analysis folder until the finished scene is up or the viewer stops."""
+        from web.viewer.partial import refresh
+
+        while not live.stop.wait(self.poll_s):
+            with live.lock:
+                if not live.partial:
+                    return
+                try:
+                    changed = refresh(live.state, work_dir)
+                    if live.state.result is not None:
+                        self._finish(live, live.state.reference_joints, live.state.result)
+                        log.info("live.finished analysis=%s", analysis_id)
+                        return
+                    if changed:
+                        live.scene.update(live.state)
+                except Exception as exc:  # keep the view; the next poll may do better
+                    log.warning("live.refresh_failed analysis=%s error=%s", analysis_id, exc)
 
     def _evict_locked(self) -> None:
         now = time.monotonic()
@@ -105,6 +224,7 @@ class LiveViewers:
 
     @staticmethod
     def _stop(live: _Live) -> None:
+        live.stop.set()
         try:
             live.scene.close()
         finally:

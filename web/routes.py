@@ -9,6 +9,7 @@ Pages (session-cookie sign-in, ``POST /api/v1/session``):
     /analyses/{id}/report        printable report
     /dashboard                   coach: the club's analyses with filters
     /references                  coach: upload BVH, preview, segment names, weights, tolerances
+    /performers/{id}/compare     a performer's attempts over time; two of them side by side
 """
 
 from __future__ import annotations

@@ -15,7 +15,7 @@ from datetime import timedelta
 from pathlib import Path
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Body, File, Form, Header, Request, Response, UploadFile
+from fastapi import APIRouter, Body, File, Form, Header, Query, Request, Response, UploadFile
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import FileResponse, JSONResponse, PlainTextResponse
 from pydantic import BaseModel, Field
@@ -39,8 +39,8 @@ from app.core.storage import Storage
 from app.models import Analysis, Club, Comment, Reference, User
 from engine.errors import InvalidInput
 from web import invites
-from web.live import ViewerUnavailable, get_viewers
-from web.pages import media
+from web.live import NothingToShowYet, ViewerUnavailable, get_viewers
+from web.pages import compare, media
 
 router = APIRouter(prefix="/web/api", include_in_schema=False)
 
@@ -337,6 +337,82 @@ async def export_bvh(
     )  # fmt: skip
 
 
+# ---- progress over time
+def get_performer_for(session, user: User, performer_id: int) -> User:
+    """A performer of the user's club whom the user may see: a coach any, a performer only
+    themselves."""
+    p = crud.get_performer(session, club_id=user.club_id, user_id=performer_id)
+    if p is None or (user.role != "coach" and p.id != user.id):
+        raise not_found("performer", performer_id)
+    return p
+
+
+def history_of(session, performer: User, notifier) -> list[dict[str, Any]]:
+    """The performer's analyses, oldest first, with their mean error once done."""
+    items, _ = crud.list_analyses(
+        session, club_id=performer.club_id, performer_id=performer.id, limit=1000, offset=0
+    )
+    out = []
+    for a in reversed(items):
+        reflect(session, a, on_final=notifier)
+        done = a.status == "done" and a.result_path
+        out.append({
+            "id": a.id, "created_at": a.created_at.isoformat(), "status": a.status,
+            "reference_id": a.reference_id, "reference": a.reference.name,
+            "mean_error_deg": compare.mean_error_of_file(a.result_path) if done else None,
+            "url": f"/analyses/{a.id}",
+        })  # fmt: skip
+    return out
+
+
+@router.get("/performers/{performer_id}/history")
+def performer_history(
+    performer_id: int, user: CurrentUser, session: SessionDep, notifier: NotifierDep
+):
+    p = get_performer_for(session, user, performer_id)
+    return {
+        "performer": {"id": p.id, "display_name": p.display_name},
+        "analyses": history_of(session, p, notifier),
+    }
+
+
+def _attempt(a: Analysis) -> dict[str, Any]:
+    return {
+        "id": a.id, "created_at": a.created_at.isoformat(), "url": f"/analyses/{a.id}",
+        "video": f"/web/api/analyses/{a.id}/video.mp4",
+    }  # fmt: skip
+
+
+@router.get("/performers/{performer_id}/compare")
+def compare_attempts(
+    performer_id: int,
+    user: CurrentUser,
+    session: SessionDep,
+    notifier: NotifierDep,
+    a: Annotated[str, Query(max_length=36)],
+    b: Annotated[str, Query(max_length=36)],
+):
+    """Two finished analyses of one performer against the same reference: per-segment error
+    and tempo with the change from A to B, both error curves over the reference's frames."""
+    p = get_performer_for(session, user, performer_id)
+    first, second = get_analysis_for(session, user, a), get_analysis_for(session, user, b)
+    if first.performer_id != p.id or second.performer_id != p.id:
+        raise ApiError(422, "invalid_request", "both analyses must be this performer's")
+    if first.reference_id != second.reference_id:
+        raise ApiError(422, "invalid_request", "the two analyses use different references")
+    ra, rb = load_result(session, first, notifier), load_result(session, second, notifier)
+    n = max(len(ra.get("segments") or []), len(rb.get("segments") or []))
+    try:
+        data = compare.compare_results(ra, rb, segment_names(first.reference, n))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ApiError(500, "bad_result", f"a result has malformed segments ({exc})") from None
+    return {
+        "performer": {"id": p.id, "display_name": p.display_name},
+        "reference": {"id": first.reference_id, "name": first.reference.name},
+        "a": _attempt(first), "b": _attempt(second), **data,
+    }  # fmt: skip
+
+
 # ---- comments
 class CommentCreate(BaseModel):
     body: str = Field(min_length=1, max_length=4000)
@@ -462,6 +538,30 @@ async def start_viewer(
         raise ApiError(503, "viewer_unavailable", str(exc)) from None
     host = request.url.hostname or "127.0.0.1"
     return {"port": port, "url": f"{request.url.scheme}://{host}:{port}/"}
+
+
+@router.post("/analyses/{analysis_id}/viewer/live")
+async def start_live_viewer(
+    analysis_id: str, request: Request, user: CurrentUser, session: SessionDep,
+    notifier: NotifierDep,
+):  # fmt: skip
+    """The 3D view of a running analysis, filled in from its folder as stages finish.
+
+    409 ``not_ready`` until stage 2's output exists (the page asks again); once the analysis
+    is done the same server shows the finished scene (``phase`` "done").
+    """
+    a = get_analysis_for(session, user, analysis_id)
+    reflect(session, a, on_final=notifier)
+    if a.status in ("failed", "cancelled") or not a.work_dir:
+        raise ApiError(409, "not_ready", f"the analysis is {a.status}", {"status": a.status})
+    try:
+        port, state = await run_in_threadpool(get_viewers().ensure_running, a.id, a.work_dir)
+    except NothingToShowYet as exc:
+        raise ApiError(409, "not_ready", str(exc), {"status": a.status}) from None
+    except ViewerUnavailable as exc:
+        raise ApiError(503, "viewer_unavailable", str(exc)) from None
+    host = request.url.hostname or "127.0.0.1"
+    return {"port": port, "url": f"{request.url.scheme}://{host}:{port}/", **state}
 
 
 class FrameBody(BaseModel):

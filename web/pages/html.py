@@ -188,6 +188,26 @@ def dashboard(
     )  # fmt: skip
 
 
+@router.get("/performers/{performer_id}/compare", response_class=HTMLResponse)
+def compare_page(
+    request: Request,
+    performer_id: int,
+    session: SessionDep,
+    a: Annotated[str, Query(max_length=36)] = "",
+    b: Annotated[str, Query(max_length=36)] = "",
+):
+    """A performer's analyses over time (mean error, trend) and two of them side by side."""
+    user = page_user(request, session)
+    if user is None:
+        return _sign_in(request)
+    try:
+        performer = api.get_performer_for(session, user, performer_id)
+    except ApiError:
+        return _render(request, "message.html", user, 404, title="Not found",
+                       message="There is no such performer in your club.")  # fmt: skip
+    return _render(request, "compare.html", user, performer=performer, a=a, b=b)
+
+
 @router.get("/references", response_class=HTMLResponse)
 def references_page(request: Request, session: SessionDep):
     user = page_user(request, session)

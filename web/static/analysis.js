@@ -36,7 +36,42 @@
     if (a.error) { $("analysis-error").textContent = a.error; $("analysis-error").hidden = false; }
     $("cancel").hidden = !(a.status === "queued" || a.status === "running");
   }
+  // While it runs, the 3D view fills in: the aligned expert after stage 2, the best candidate
+  // of each frame as stage 3 finishes it, colours when stage 4 is done (web/viewer/partial.py).
+  const LIVE_TEXT = {
+    reference: "3D: the expert aligned to your video (stage 2); candidates follow.",
+    candidates: "3D: best candidate postures for {done} of {n} frames (stage 3).",
+    done: "3D: finished; colours show each bone's error.",
+  };
+  let liveTimer = null, liveBusy = false;
+  function followLive() {
+    if (liveTimer) return;
+    const fig = $("live3d"), iframe = $("live-viewer3d");
+    async function step() {
+      if (liveBusy) return;
+      liveBusy = true;
+      try {
+        const v = await coach.api(base + "/viewer/live", { method: "POST" });
+        if (!iframe.getAttribute("src")) iframe.src = v.url;
+        fig.hidden = false;
+        fig.dataset.phase = v.phase;
+        fig.dataset.framesDone = String(v.frames_done);
+        $("live3d-status").textContent = (LIVE_TEXT[v.phase] || "").replace("{done}", v.frames_done).replace("{n}", v.frames);
+      } catch (e) {
+        if (e.status !== 409) { stopLive(); }  // 409: stage 2 is not done yet, ask again
+      } finally { liveBusy = false; }
+    }
+    liveTimer = setInterval(step, 1000);
+    step();
+  }
+  function stopLive() {
+    if (liveTimer) { clearInterval(liveTimer); liveTimer = null; }
+    const iframe = $("live-viewer3d");
+    if (iframe.getAttribute("src")) iframe.src = "about:blank";  // drop its connection
+    $("live3d").hidden = true;
+  }
   function finished(status) {
+    stopLive();
     if (status === "done") { $("progress-view").hidden = true; loadResults(); }
     else { $("stage-message").textContent = "The analysis " + status + "."; $("cancel").hidden = true; }
   }
@@ -341,5 +376,5 @@
 
   // ---------------------------------------------------------------- start
   if (root.dataset.status === "done") loadResults();
-  else if (root.dataset.status === "queued" || root.dataset.status === "running") follow();
+  else if (root.dataset.status === "queued" || root.dataset.status === "running") { follow(); followLive(); }
 })();

@@ -127,7 +127,12 @@ def frame_body(scene: ViewerScene) -> tuple[np.ndarray, np.ndarray, float]:
     for i in range(len(scene.frames)):
         ref, sel, _ = scene.postures(i)
         pts += [ref, sel]
-    p = np.concatenate(pts).reshape(-1, 3)
+    return frame_points(np.concatenate(pts))
+
+
+def frame_points(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """:func:`frame_body` for any points (..., 3): (look_at, position, floor); NaN ignored."""
+    p = np.asarray(points, float).reshape(-1, 3)
     p = p[np.isfinite(p).all(1)]
     if not len(p):
         p = np.zeros((1, 3))
