@@ -21,9 +21,10 @@ setup: system $(STAMP)
 demo: setup
 	$(VENV)/bin/coach serve
 
-test: setup
+test: setup lint
 	PYOPENGL_PLATFORM=egl $(PY) -m pytest -q -p no:cacheprovider
 
+# Lint and type-check (STYLE.md tooling); part of `make test`, so CI enforces both.
 lint: setup
 	$(VENV)/bin/ruff check engine app worker web tests benchmarks
 	$(VENV)/bin/mypy

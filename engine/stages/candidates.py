@@ -339,7 +339,7 @@ class _Scorer:
         self.target, self.shape, self.camera = target, shape, camera
         self.lam = (s.lambda_a, s.lambda_e)
         self.ds_w, self.w_w = s.ds_weight, s.width_weight
-        self.w_kw = {"coverage_weight": s.coverage_weight, "deep_k": s.deep_k}
+        self.coverage_weight, self.deep_k = s.coverage_weight, s.deep_k
         self.width = WidthTarget.from_mask(target.silhouette) if s.width_weight > 0 else None
         self.parts = PartScorer(
             target, shape, camera, joints, lambda_A=s.lambda_a, lambda_E=s.lambda_e
@@ -353,8 +353,9 @@ class _Scorer:
         if self.width is None:
             return np.zeros(len(postures))
         return self.w_w * width_robust_cost(
-            postures, self.width, self.shape, self.camera, **self.w_kw
-        )
+            postures, self.width, self.shape, self.camera,
+            coverage_weight=self.coverage_weight, deep_k=self.deep_k,
+        )  # fmt: skip
 
     def part(self, part: int, samples: np.ndarray) -> np.ndarray:
         self.n_evals += len(samples)
@@ -421,7 +422,7 @@ def _refine(
 
     def objective(q: np.ndarray) -> np.ndarray:
         out = scorer.full(q)
-        return out + mu * d_B(q, ref) if mu > 0 else out
+        return out + mu * d_B(q, ref) if mu > 0 and ref is not None else out
 
     cur = joints.copy()
     best = float(objective(cur[None])[0])
@@ -449,11 +450,11 @@ def _refine(
                 for vec in camera.R_cam_world[:2]:
                     for sg in (-1.0, 1.0):
                         samples.append(cur + sg * 0.5 * px * vec * max(step / np.radians(1), 0.5))
-            samples = np.stack(samples)
-            sc = objective(samples)
+            batch = np.stack(samples)
+            sc = objective(batch)
             k = int(np.argmin(sc))
-            if sc[k] < best - 1e-9 and limits_ok(samples[k]):
-                cur, best, improved = samples[k], float(sc[k]), True
+            if sc[k] < best - 1e-9 and limits_ok(batch[k]):
+                cur, best, improved = batch[k], float(sc[k]), True
         if not improved:
             step /= 2.0
             if step < np.radians(s.refine_min_step_deg):
@@ -746,8 +747,8 @@ def estimate_candidates(
     if starts:
         cands = _append_distinct(cands, np.stack(starts), s.n_candidates)
     d_s = scorer.full(cands)
-    prior = s.prior_weight * d_B(cands, ref)
-    return FrameCandidates(cands, d_s, tuple(flags), np.asarray(history), prior)
+    prior_cost = s.prior_weight * d_B(cands, ref)
+    return FrameCandidates(cands, d_s, tuple(flags), np.asarray(history), prior_cost)
 
 
 def _in_plane_candidates(
