@@ -95,3 +95,17 @@ def test_default_secret_refused_outside_development():
     with pytest.raises(ValueError, match="COACH_SECRET_KEY"):
         Settings(environment="production")
     Settings(environment="production", secret_key="s3cret-from-the-vault")
+
+
+def test_metrics_are_prometheus_text_from_the_workers_files(client, settings):
+    from worker import metrics
+
+    metrics.configure(settings.data_dir / "metrics")
+    try:
+        metrics.inc("coach_analyses_total", state="done")
+    finally:
+        metrics.configure(None)
+    r = client.get("/api/v1/metrics")
+    assert r.status_code == 200
+    assert r.headers["content-type"].startswith("text/plain")
+    assert 'coach_analyses_total{state="done"} 1' in r.text
