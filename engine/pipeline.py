@@ -27,6 +27,7 @@ from engine.errors import InvalidInput
 from engine.io.stagefiles import load_arrays, pack_masks, save_arrays, unpack_masks
 from engine.render.camera import Camera
 from engine.settings import Settings
+from engine.stages.selection import Selection
 from engine.types import Segments
 
 ProgressFn = Callable[[str, float], None]
@@ -342,6 +343,7 @@ def select(
         settings=sel_settings, fps_ratio=prepared.reference_fps / prepared.video["fps"],
         candidate_flags=flags, candidate_d_s=d_s, on_progress=on_progress,
     )  # fmt: skip
+    selection = flag_image_misfit(selection, d_s, sel_settings.misfit_margin)
     timing = dict(prepared.timing_s)
     timing["candidates"] = float(sum(c.seconds for c in order))
     timing["selection"] = time.perf_counter() - t0
@@ -357,6 +359,40 @@ def select(
         selection=selection, candidates=cands, timing_s=timing, domain=domain,
         video_frame_offset=int(v.get("offset", 0)),
     )  # fmt: skip
+
+
+def flag_image_misfit(
+    selection: Selection, d_s: Sequence[np.ndarray], margin: float
+) -> Selection:
+    """Flag frames whose selected posture the video does not confirm (beyond the thesis).
+
+    The calibration frame (video frame 0, whose posture is the reference's by the thesis'
+    assumption B'_0 = B_0) sets the d_S a correct posture reaches on this video; a frame
+    whose selected candidate scores worse by more than ``margin`` gets ``image_misfit``,
+    and a summary message says how many, so a coach never reads a small error there as
+    certain.
+
+    Parameters
+    ----------
+    selection : Selection
+    d_s : list of ndarray, shape (K_t',) each
+        d_S of every candidate, indices matching ``selection.selected``.
+    margin : float
+    """
+    chosen = np.array([d[int(k)] for d, k in zip(d_s, selection.selected, strict=True)])
+    bad = chosen > chosen[0] + margin
+    if not bad.any():
+        return selection
+    flags = tuple(
+        (*f, "image_misfit") if b else tuple(f)
+        for f, b in zip(selection.flags, bad, strict=True)
+    )
+    n, total = int(bad.sum()), len(bad)
+    message = (
+        f"The video matches the reported posture poorly in {n} of {total} frames (flag "
+        "image_misfit): the errors shown there may be underestimated."
+    )
+    return dataclasses.replace(selection, flags=flags, messages=(*selection.messages, message))
 
 
 def original_pixels(camera: Camera, width: int, height: int) -> Camera:

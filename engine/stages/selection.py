@@ -76,6 +76,11 @@ class SelectionSettings:
         default keeps every candidate: on the public cases the capsule body's lowest d_S
         lies 10-30 deg from the truth, 0.05-0.1 below the true posture's, so a tight margin
         drops the only right candidate.
+    misfit_margin : float
+        A frame whose selected posture explains the image worse (d_S) than the calibration
+        frame's by more than this is flagged ``image_misfit``: the posture reported there is not
+        confirmed by the video, and its errors may be underestimated (beyond the thesis; on
+        P1 the selected posture's d_S ranks with the true error at Spearman 0.5).
     anchor_deg_per_frame : float
         Cost (degrees of d_B) per video frame that C(t') departs from stage 2's C, and
         likewise per video frame a performer boundary departs from stage 2's (4.7.1 step 4);
@@ -101,6 +106,7 @@ class SelectionSettings:
     image_weight: float = 2.0
     image_margin: float = 1.0
     anchor_deg_per_frame: float = 1.0
+    misfit_margin: float = 0.1
 
 
 @dataclass(frozen=True)

@@ -120,3 +120,20 @@ def test_analyze_gives_a_valid_result(case_dir) -> None:
     assert ref == sorted(ref)
     for f in doc["frames"]:
         assert 0 <= f["selected"] < len(f["candidates"])
+
+
+def test_frames_the_video_does_not_confirm_are_flagged():
+    from engine.pipeline import flag_image_misfit
+    from engine.stages.selection import Selection
+
+    n = 4
+    sel = Selection(
+        performer_segments=Segments((0,), n - 1), C=np.arange(n), selected=np.array([0, 1, 0, 1]),
+        joints=np.zeros((n, 17, 3)), posture_error=np.zeros(n), bone_errors=np.zeros((n, 16)),
+        flags=((),) * n, segments=(), messages=(),
+    )  # fmt: skip
+    d_s = [np.array([0.30, 0.9]), np.array([0.9, 0.35]), np.array([0.6, 0.2]), np.array([0, 0.5])]
+    out = flag_image_misfit(sel, d_s, 0.1)
+    assert [("image_misfit" in f) for f in out.flags] == [False, False, True, True]
+    assert any("2 of 4 frames" in m for m in out.messages)
+    assert flag_image_misfit(sel, d_s, 1.0) is sel
