@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 
 import numpy as np
 import pytest
@@ -68,7 +69,10 @@ def test_upload_through_the_page_runs_to_results(server, browser, clip, shots):
 def test_results_overlay_plot_and_cursor_follow_the_video(
     server, browser, clip, clip_result, shots
 ):
-    aid = server.add_done_analysis("pat", clip, clip_result)
+    result = json.loads(json.dumps(clip_result))
+    note = "The video matches the reported posture poorly in 3 of 12 frames."
+    result["summary"]["messages"] = [*result["summary"]["messages"], note]
+    aid = server.add_done_analysis("pat", clip, result)
     ctx = browser.new_context(viewport={"width": 1280, "height": 1000})
     page = ctx.new_page()
     sign_in(page, server.url, "pat@example.com", next_path=f"/analyses/{aid}")
@@ -78,6 +82,10 @@ def test_results_overlay_plot_and_cursor_follow_the_video(
     page.locator("#stage-box").screenshot(path=str(shots / "overlay.png"))
     assert red > 10 and green > 10, (red, green)
     assert page.locator("#plot-svg polyline").count() >= 2
+    box = page.locator("#result-messages li")
+    assert page.locator("#result-messages").is_visible()
+    assert box.count() == len(result["summary"]["messages"])
+    assert box.last.inner_text() == note
     assert page.locator(".seg-card").count() == len(clip_result["segments"])
     page.wait_for_selector("#viewer3d:not([hidden]), #fallback3d:not([hidden])", timeout=30_000)
     page.wait_for_timeout(1500)  # let the 3D view draw

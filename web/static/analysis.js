@@ -107,10 +107,19 @@
     fps = result.video.fps; n = result.frames.length;
     overlay.width = result.video.width; overlay.height = result.video.height;
     video.src = base + "/video.mp4";
+    showMessages((result.summary && result.summary.messages) || []);
     buildBonePicks(); buildPlot(); buildSegments(); loadComments(); start3d();
     $("plot").setAttribute("aria-valuemax", String(n - 1));
     setFrame(0, true);
     root.dataset.ready = "true";
+  }
+
+  // The engine's overall messages (missing segments, a very different performance, frames
+  // the video does not confirm) come first: they qualify every number below.
+  function showMessages(messages) {
+    const box = $("result-messages");
+    box.replaceChildren(...messages.map(function (m) { return coach.el("li", { text: m }); }));
+    box.hidden = messages.length === 0;
   }
 
   function frameAtTime(t) { return Math.max(0, Math.min(n - 1, Math.floor(t * fps + 1e-3))); }
