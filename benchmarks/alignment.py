@@ -32,6 +32,7 @@ from engine.stages.alignment import (  # noqa: E402
     make_targets,
     rotate_about_hip,
     rotation_samples,
+    step_costs,
     window_size,
 )  # fmt: skip
 from engine.stages.calibration import calibrate  # noqa: E402
@@ -65,26 +66,39 @@ def main() -> None:
           f"cost matrix {t_cost:.1f} s = {1e3 * t_cost / cost.size:.3f} ms per d(t', t) "
           "(shared 2-core machine, noisy)")  # fmt: skip
 
-    def run(k: float, band: float) -> tuple[float, float, float]:
+    def run(k: float, band: float, slope: float = 0.0) -> tuple[float, float, float]:
         mask = band_mask(n_v, n_r, band * (n_r - 1))
         w = window_size(k, n_r, n_v)
+        # the shipped DP adds a slope prior (alignment.step_costs); 0 is the thesis' eq. 4.11
+        steps = step_costs(w, (n_r - 1) / max(n_v - 1, 1), slope) if slope else None
         t = time.perf_counter()
         try:
-            C, total = dp_path(np.where(mask, cost, np.inf), window=w, min_step=0)
+            C, total = dp_path(
+                np.where(mask, cost, np.inf), window=w, min_step=0, step_cost=steps
+            )
         except InvalidInput:
             return np.nan, np.nan, time.perf_counter() - t
         dt = time.perf_counter() - t
-        return total / n_v, float(np.abs(frames[C] - truth).mean()), dt
+        e_c = float(cost[np.arange(n_v), C].mean())  # E_C of eq. 4.10, without the prior
+        return e_c, float(np.abs(frames[C] - truth).mean()), dt
 
-    print("\nwindow (fig 5.3-5.4), beta/L = 50 %\n   k    E_C    |C-C_true| ref frames")
+    slope = AlignmentSettings().slope_weight
+    print(
+        "\nwindow (fig 5.3-5.4), beta/L = 50 %; thesis DP, then with the shipped slope prior "
+        f"({slope})\n   k    E_C    |C-C_true| ref frames   |  E_C    |C-C_true|"
+    )
     for k in (1, 2, 4, 7, 10, 20):
         e, err, _ = run(k, 0.5)
-        print(f"{k:4d} {e:7.4f} {err:9.2f}")
-    print("\nband (fig 5.5-5.7), k = 10\nbeta/L  E_C    |C-C_true|  DP ms")
+        e2, err2, _ = run(k, 0.5, slope)
+        print(f"{k:4d} {e:7.4f} {err:9.2f}              | {e2:7.4f} {err2:9.2f}")
+    print(
+        "\nband (fig 5.5-5.7), k = 10\nbeta/L  E_C    |C-C_true|  DP ms   |  with slope prior: "
+        "E_C  |C-C_true|"
+    )
     for b in (0.05, 0.10, 0.20, 0.40, 1.00):
         e, err, dt = run(10, b)
-        print(f"{100 * b:5.0f}% {e:7.4f} {err:9.2f} {1e3 * dt:8.2f}")
-
+        e2, err2, _ = run(10, b, slope)
+        print(f"{100 * b:5.0f}% {e:7.4f} {err:9.2f} {1e3 * dt:8.2f}   | {e2:7.4f} {err2:9.2f}")
 
 if __name__ == "__main__":
     main()
