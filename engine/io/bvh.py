@@ -624,6 +624,19 @@ def _interpolate(joints: np.ndarray, shape: BodyShape, f: np.ndarray) -> np.ndar
     return forward_kinematics(shape.offsets, root, Ri)
 
 
+def _resample_frames(motion: Motion, fps: float) -> tuple[np.ndarray, int]:
+    """Old fractional frames (N,) of the new frames at ``fps``, and the new first motion frame.
+
+    Raises InvalidInput when ``fps`` is not a positive finite number.
+    """
+    if not (isinstance(fps, int | float) and math.isfinite(fps) and fps > 0):
+        raise InvalidInput(f"fps must be a positive number, got {fps!r}")
+    n = int(math.floor(motion.duration_s * fps + 1e-6)) + 1
+    f = np.minimum(np.arange(n) * motion.fps / fps, motion.frames - 1)
+    first = int(math.ceil(motion.first_motion_frame * fps / motion.fps - 1e-9))
+    return f, first
+
+
 def resample(motion: Motion, fps: float, shape: BodyShape) -> Motion:
     """The motion at another frame rate (slerp of part rotations, linear root).
 
@@ -648,12 +661,8 @@ def resample(motion: Motion, fps: float, shape: BodyShape) -> Motion:
     InvalidInput
         When ``fps`` is not a positive finite number.
     """
-    if not (isinstance(fps, int | float) and math.isfinite(fps) and fps > 0):
-        raise InvalidInput(f"fps must be a positive number, got {fps!r}")
-    n = int(math.floor(motion.duration_s * fps + 1e-6)) + 1
-    f = np.minimum(np.arange(n) * motion.fps / fps, motion.frames - 1)
+    f, first = _resample_frames(motion, fps)
     joints = _interpolate(motion.joints, shape, f)
-    first = int(math.ceil(motion.first_motion_frame * fps / motion.fps - 1e-9))
     return Motion(joints=joints, fps=float(fps), name=motion.name, first_motion_frame=first)
 
 
@@ -716,12 +725,8 @@ def resample_reference(reference: Reference, fps: float) -> Motion:
     InvalidInput
         When ``fps`` is not a positive finite number.
     """
-    if not (isinstance(fps, int | float) and math.isfinite(fps) and fps > 0):
-        raise InvalidInput(f"fps must be a positive number, got {fps!r}")
     m = reference.motion
-    n = int(math.floor(m.duration_s * fps + 1e-6)) + 1
-    f = np.minimum(np.arange(n) * m.fps / fps, m.frames - 1)
-    first = int(math.ceil(m.first_motion_frame * fps / m.fps - 1e-9))
+    f, first = _resample_frames(m, fps)
     joints = sample_reference(reference, f)
     return Motion(joints=joints, fps=float(fps), name=m.name, first_motion_frame=first)
 

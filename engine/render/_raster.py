@@ -92,6 +92,65 @@ def row_span(ax: float, ay: float, bx: float, by: float, r: float, v: float) -> 
     return lo, hi
 
 
+@njit(cache=True, inline="always")
+def _rows(ay: float, by: float, r: float, lo: int, hi: int) -> tuple:
+    """Rows (v0, v1) in [lo, hi] that a capsule with end rows ``ay``, ``by``, radius ``r`` spans."""
+    return max(_ceil(min(ay, by) - r), lo), min(_floor(max(ay, by) + r), hi)
+
+
+@njit(cache=True, inline="always")
+def _cols(ax: float, ay: float, bx: float, by: float, r: float, v: int, lo: int, hi: int) -> tuple:
+    """Pixel columns (i0, i1) where row ``v`` meets the capsule, in [lo, hi]; i0 > i1 when none."""
+    a0, a1 = row_span(ax, ay, bx, by, r, v)
+    if not a0 <= a1:
+        return lo, lo - 1
+    return max(_ceil(a0), lo), min(_floor(a1), hi)
+
+
+@njit(cache=True, inline="always")
+def _axis(ax: float, ay: float, bx: float, by: float) -> tuple:
+    """Axis direction (dx, dy) and 1 / its squared length (0 for a point capsule)."""
+    dx = bx - ax
+    dy = by - ay
+    l2 = dx * dx + dy * dy
+    return dx, dy, 1.0 / l2 if l2 > 0.0 else 0.0
+
+
+@njit(cache=True, inline="always")
+def _axis_t(u: int, v: int, ax: float, ay: float, dx: float, dy: float, inv_l2: float) -> float:
+    """Unclamped axis parameter of the pixel's projection (< 0 before end a, > 1 past end b)."""
+    return ((u - ax) * dx + (v - ay) * dy) * inv_l2
+
+
+@njit(cache=True, inline="always")
+def _front_depth(
+    u: int, v: int, tr: float, ax: float, ay: float, dx: float, dy: float,
+    za: float, zb: float, rm2: float, inv_s2: float,
+) -> float:  # fmt: skip
+    """Depth of the capsule's front surface at the pixel (see the module doc)."""
+    t = min(max(tr, 0.0), 1.0)
+    px = u - (ax + t * dx)
+    py = v - (ay + t * dy)
+    d2 = (px * px + py * py) * inv_s2
+    return za + t * (zb - za) - math.sqrt(max(rm2 - d2, 0.0))
+
+
+@njit(cache=True, inline="always")
+def _in_body(tr: float, s0: bool, s1: bool) -> bool:
+    """Whether axis parameter ``tr`` is outside the round caps at seam ends (a ``body`` pixel)."""
+    return not ((tr < 0.0 and s0) or (tr > 1.0 and s1))
+
+
+@njit(cache=True, inline="always")
+def _widen(
+    rlo: np.ndarray, rhi: np.ndarray, v: int, i0: int, i1: int, vmin: int, vmax: int
+) -> tuple:
+    """Widen row ``v``'s written extent to [i0, i1]; returns the widened rows (vmin, vmax)."""
+    rlo[v] = min(rlo[v], i0)
+    rhi[v] = max(rhi[v], i1)
+    return min(vmin, v), max(vmax, v)
+
+
 @njit(cache=True)
 def _bbox(ends: np.ndarray, rad: np.ndarray, caps: np.ndarray, H: int, W: int, margin: int):
     """Pixel box (r0, r1, c0, c1), half-open, of capsules ``caps`` grown by ``margin``."""
@@ -143,11 +202,7 @@ def sil_counts(ends: np.ndarray, rad: np.ndarray, prefix: np.ndarray, out: np.nd
         vmin = H
         vmax = -1
         for c in range(C):
-            r = rad[c]
-            a = min(e[c, 0, 1], e[c, 1, 1])
-            b = max(e[c, 0, 1], e[c, 1, 1])
-            rlo[c] = max(_ceil(a - r), 0)
-            rhi[c] = min(_floor(b + r), H - 1)
+            rlo[c], rhi[c] = _rows(e[c, 0, 1], e[c, 1, 1], rad[c], 0, H - 1)
             vmin = min(vmin, rlo[c])
             vmax = max(vmax, rhi[c])
         area = 0
@@ -156,11 +211,9 @@ def sil_counts(ends: np.ndarray, rad: np.ndarray, prefix: np.ndarray, out: np.nd
             m = 0
             for c in range(C):
                 if rlo[c] <= v <= rhi[c]:
-                    a0, a1 = row_span(e[c, 0, 0], e[c, 0, 1], e[c, 1, 0], e[c, 1, 1], rad[c], v)
-                    if not a0 <= a1:
-                        continue
-                    i0 = max(_ceil(a0), 0)
-                    i1 = min(_floor(a1), W - 1)
+                    i0, i1 = _cols(
+                        e[c, 0, 0], e[c, 0, 1], e[c, 1, 0], e[c, 1, 1], rad[c], v, 0, W - 1
+                    )
                     if i0 <= i1:
                         # insertion sort by start column
                         j = m
@@ -198,14 +251,9 @@ def fill_silhouettes(ends: np.ndarray, rad: np.ndarray, out: np.ndarray) -> None
         e = ends[n]
         for c in range(C):
             r = rad[c]
-            v0 = max(_ceil(min(e[c, 0, 1], e[c, 1, 1]) - r), 0)
-            v1 = min(_floor(max(e[c, 0, 1], e[c, 1, 1]) + r), H - 1)
+            v0, v1 = _rows(e[c, 0, 1], e[c, 1, 1], r, 0, H - 1)
             for v in range(v0, v1 + 1):
-                a0, a1 = row_span(e[c, 0, 0], e[c, 0, 1], e[c, 1, 0], e[c, 1, 1], r, v)
-                if not a0 <= a1:
-                    continue
-                i0 = max(_ceil(a0), 0)
-                i1 = min(_floor(a1), W - 1)
+                i0, i1 = _cols(e[c, 0, 0], e[c, 0, 1], e[c, 1, 0], e[c, 1, 1], r, v, 0, W - 1)
                 for u in range(i0, i1 + 1):
                     out[n, v, u] = True
 
@@ -243,33 +291,21 @@ def raster_parts(
         r = rad_px[c]
         rm2 = rad_m[c] * rad_m[c]
         inv_s2 = 1.0 / (scale * scale)
-        dx = bx - ax
-        dy = by - ay
-        l2 = dx * dx + dy * dy
-        inv_l2 = 1.0 / l2 if l2 > 0.0 else 0.0
+        dx, dy, inv_l2 = _axis(ax, ay, bx, by)
         bit = np.uint16(1 << part[c])
         s0 = seam[c, 0]
         s1 = seam[c, 1]
         pk = np.int8(part[c])
-        v0 = max(_ceil(min(ay, by) - r), r0)
-        v1 = min(_floor(max(ay, by) + r), r0 + h - 1)
+        v0, v1 = _rows(ay, by, r, r0, r0 + h - 1)
         for v in range(v0, v1 + 1):
-            a0, a1 = row_span(ax, ay, bx, by, r, v)
-            if not a0 <= a1:
-                continue
-            i0 = max(_ceil(a0), c0)
-            i1 = min(_floor(a1), c0 + w - 1)
+            i0, i1 = _cols(ax, ay, bx, by, r, v, c0, c0 + w - 1)
             rr = v - r0
             for u in range(i0, i1 + 1):
-                tr = ((u - ax) * dx + (v - ay) * dy) * inv_l2
-                t = min(max(tr, 0.0), 1.0)
-                px = u - (ax + t * dx)
-                py = v - (ay + t * dy)
-                d2 = (px * px + py * py) * inv_s2
-                zs = za + t * (zb - za) - math.sqrt(max(rm2 - d2, 0.0))
+                tr = _axis_t(u, v, ax, ay, dx, dy, inv_l2)
+                zs = _front_depth(u, v, tr, ax, ay, dx, dy, za, zb, rm2, inv_s2)
                 cc = u - c0
                 cov[rr, cc] |= bit
-                if not ((tr < 0.0 and s0) or (tr > 1.0 and s1)):
+                if _in_body(tr, s0, s1):
                     body[rr, cc] |= bit
                 if zs < z[rr, cc]:
                     z[rr, cc] = zs
@@ -338,41 +374,26 @@ def _raster_image(
         za, zb = zends[c, 0], zends[c, 1]
         r = rad_px[c]
         rm2 = rad_m[c] * rad_m[c]
-        dx = bx - ax
-        dy = by - ay
-        l2 = dx * dx + dy * dy
-        inv_l2 = 1.0 / l2 if l2 > 0.0 else 0.0
+        dx, dy, inv_l2 = _axis(ax, ay, bx, by)
         bit = np.uint16(1 << part[c])
         s0 = seam[c, 0]
         s1 = seam[c, 1]
         pk = np.int8(part[c])
-        v0 = max(_ceil(min(ay, by) - r), 0)
-        v1 = min(_floor(max(ay, by) + r), H - 1)
+        v0, v1 = _rows(ay, by, r, 0, H - 1)
         for v in range(v0, v1 + 1):
-            a0, a1 = row_span(ax, ay, bx, by, r, v)
-            if not a0 <= a1:
-                continue
-            i0 = max(_ceil(a0), 0)
-            i1 = min(_floor(a1), W - 1)
+            i0, i1 = _cols(ax, ay, bx, by, r, v, 0, W - 1)
             if i0 > i1:
                 continue
-            rlo[v] = min(rlo[v], i0)
-            rhi[v] = max(rhi[v], i1)
-            vmin = min(vmin, v)
-            vmax = max(vmax, v)
+            vmin, vmax = _widen(rlo, rhi, v, i0, i1, vmin, vmax)
             zr = z[v]
             lr = label[v]
             cr = cov[v]
             br = body[v]
             for u in range(i0, i1 + 1):
-                tr = ((u - ax) * dx + (v - ay) * dy) * inv_l2
-                t = min(max(tr, 0.0), 1.0)
-                px = u - (ax + t * dx)
-                py = v - (ay + t * dy)
-                d2 = (px * px + py * py) * inv_s2
-                zs = za + t * (zb - za) - math.sqrt(max(rm2 - d2, 0.0))
+                tr = _axis_t(u, v, ax, ay, dx, dy, inv_l2)
+                zs = _front_depth(u, v, tr, ax, ay, dx, dy, za, zb, rm2, inv_s2)
                 cr[u] |= bit
-                if not ((tr < 0.0 and s0) or (tr > 1.0 and s1)):
+                if _in_body(tr, s0, s1):
                     br[u] |= bit
                 if zs < zr[u]:
                     zr[u] = zs
@@ -568,45 +589,30 @@ def part_counts(
             za, zbb = zends[n, c, 0], zends[n, c, 1]
             r = rad_px[c]
             rm2 = rad_m[c] * rad_m[c]
-            dx = bx - ax
-            dy = by - ay
-            l2 = dx * dx + dy * dy
-            inv_l2 = 1.0 / l2 if l2 > 0.0 else 0.0
+            dx, dy, inv_l2 = _axis(ax, ay, bx, by)
             s0 = seam[c, 0]
             s1 = seam[c, 1]
-            v0 = max(_ceil(min(ay, by) - r), 0)
-            v1 = min(_floor(max(ay, by) + r), H - 1)
+            v0, v1 = _rows(ay, by, r, 0, H - 1)
             for v in range(v0, v1 + 1):
-                a0, a1 = row_span(ax, ay, bx, by, r, v)
-                if not a0 <= a1:
-                    continue
-                i0 = max(_ceil(a0), 0)
-                i1 = min(_floor(a1), W - 1)
+                i0, i1 = _cols(ax, ay, bx, by, r, v, 0, W - 1)
                 if i0 > i1:
                     continue
-                rlo[v] = min(rlo[v], i0)
-                rhi[v] = max(rhi[v], i1)
-                vmin = min(vmin, v)
-                vmax = max(vmax, v)
+                vmin, vmax = _widen(rlo, rhi, v, i0, i1, vmin, vmax)
                 fr = fb[v + 1]
                 zr = zb[v + 1]
                 xr = fixed_flags[v]
                 for u in range(i0, i1 + 1):
-                    tr = ((u - ax) * dx + (v - ay) * dy) * inv_l2
+                    tr = _axis_t(u, v, ax, ay, dx, dy, inv_l2)
                     f = fr[u + 1]
                     if not xr[u] & 1:
                         # nothing fixed here: visible whatever its depth, skip the sqrt
                         zr[u + 1] = -_INF
                     else:
-                        t = min(max(tr, 0.0), 1.0)
-                        px = u - (ax + t * dx)
-                        py = v - (ay + t * dy)
-                        d2 = (px * px + py * py) * inv_s2
-                        zs = za + t * (zbb - za) - math.sqrt(max(rm2 - d2, 0.0))
+                        zs = _front_depth(u, v, tr, ax, ay, dx, dy, za, zbb, rm2, inv_s2)
                         if f == 0 or zs < zr[u + 1]:
                             zr[u + 1] = zs
                     f |= 1
-                    if not ((tr < 0.0 and s0) or (tr > 1.0 and s1)):
+                    if _in_body(tr, s0, s1):
                         f |= 2
                     fr[u + 1] = f
         add_a = 0

@@ -387,6 +387,15 @@ def _d_E(sum_cost: np.ndarray, count: np.ndarray, xi: float) -> np.ndarray:
     return np.where(count > 0, sum_cost / np.maximum(count, 1), xi)
 
 
+def _project_batch(
+    joints: np.ndarray, target: Target, shape: BodyShape, camera: Camera
+) -> ProjectedCapsules:
+    """Checked ``joints`` (N, 17, 3) and ``target`` of a batch measure, projected."""
+    j = _check_joints(joints, "joints", batch=True)
+    _check_camera_target(camera, target)
+    return _project(j, shape, camera)
+
+
 def d_A_batch(joints: np.ndarray, target: Target, shape: BodyShape, camera: Camera) -> np.ndarray:
     """Silhouette difference d_A (thesis eq. 4.1) of many postures, no image allocated.
 
@@ -406,10 +415,8 @@ def d_A_batch(joints: np.ndarray, target: Target, shape: BodyShape, camera: Came
     InvalidInput
         Bad ``joints``, or a target whose size differs from the camera's image.
     """
-    j = _check_joints(joints, "joints", batch=True)
-    _check_camera_target(camera, target)
-    pc = _project(j, shape, camera)
-    out = np.empty((j.shape[0], 2), dtype=np.int64)
+    pc = _project_batch(joints, target, shape, camera)
+    out = np.empty((pc.ends_px.shape[0], 2), dtype=np.int64)
     _raster.sil_counts(pc.ends_px, pc.radius_px, target.prefix, out)
     return _d_A(out[:, 0], out[:, 1], target.area)
 
@@ -447,11 +454,10 @@ def d_S_batch(
     InvalidInput
         Bad ``joints``, or a target whose size differs from the camera's image.
     """
-    j = _check_joints(joints, "joints", batch=True)
-    _check_camera_target(camera, target)
-    pc = _project(j, shape, camera)
-    out_i = np.empty((j.shape[0], 3), dtype=np.int64)
-    out_f = np.empty(j.shape[0])
+    pc = _project_batch(joints, target, shape, camera)
+    n = pc.ends_px.shape[0]
+    out_i = np.empty((n, 3), dtype=np.int64)
+    out_f = np.empty(n)
     _raster.full_counts(
         pc.ends_px, pc.depth, pc.radius_px, pc.radius_m, _PART_I64, SEAM_END, pc.scale,
         target.silhouette, target.cost, out_i, out_f,

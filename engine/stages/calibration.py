@@ -190,21 +190,7 @@ def _refine(
                                lambda_E=s.lambda_E)[0]
         )  # fmt: skip
 
-    best = score(cam)
-    for step_px in (4.0, 2.0, 1.0, 0.5):
-        improved = True
-        while improved:
-            improved = False
-            cands = [
-                cam.with_(cx=cam.cx + step_px), cam.with_(cx=cam.cx - step_px),
-                cam.with_(cy=cam.cy + step_px), cam.with_(cy=cam.cy - step_px),
-                _rescale(cam, 1 + step_px / 100), _rescale(cam, 1 - step_px / 100),
-            ]  # fmt: skip
-            scores = [score(c) for c in cands]
-            k = int(np.argmin(scores))
-            if scores[k] < best - 1e-9:
-                cam, best, improved = cands[k], scores[k], True
-    return cam, best
+    return _coordinate_search(cam, score)
 
 
 def _refine_above_ankles(
@@ -230,6 +216,14 @@ def _refine_above_ankles(
         inter = np.count_nonzero(m & t)
         return 1.0 - 2.0 * inter / max(int(np.count_nonzero(m) + np.count_nonzero(t)), 1)
 
+    return _coordinate_search(cam, score)
+
+
+def _coordinate_search(cam: Camera, score: Callable[[Camera], float]) -> tuple[Camera, float]:
+    """Greedy search on position (steps of 4, 2, 1, 0.5 px) and scale (the same in %).
+
+    At each step size, moves to the best of the six neighbours while it lowers ``score``.
+    """
     best = score(cam)
     for step_px in (4.0, 2.0, 1.0, 0.5):
         improved = True

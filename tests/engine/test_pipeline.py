@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from engine.body.kinematics import forward_kinematics, rotation_about_axis
 from engine.body.shapes import BodyShape
 from engine.errors import InvalidInput
 from engine.io.bvh import write_bvh
@@ -14,6 +13,7 @@ from engine.io.result import validate_result
 from engine.pipeline import CandidateChunk, Prepared, analyze, candidates, prepare, select
 from engine.synth import SynthSettings, synthesize
 from engine.types import Motion, Segments
+from tests.synthetic import StubReference, swing_joints
 
 #: Small and fast: stages 0-2 as configured, stage 3 with few samples.
 SETTINGS = {
@@ -23,31 +23,16 @@ SETTINGS = {
 }
 
 
-class _Ref:
-    def __init__(self, motion: Motion, shape: BodyShape) -> None:
-        self.motion, self.shape = motion, shape
-
-
 @pytest.fixture(scope="module")
 def case_dir(tmp_path_factory):
     """A 60 fps arm-and-leg swing, filmed at 15 fps (160 x 120) with one wrong segment."""
     shape = BodyShape.default(1.75)
     T = 60
-    s = np.sin(np.linspace(0.0, 2.0 * np.pi, T))
-    R = np.broadcast_to(np.eye(3), (T, 12, 3, 3)).copy()
-    x, z = np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0])
-    R[:, 4] = rotation_about_axis(z, -1.2 + 0.6 * s)
-    R[:, 5] = rotation_about_axis(x, 0.8 + 0.5 * s) @ R[:, 4]
-    R[:, 6] = rotation_about_axis(z, 1.2 - 0.6 * s)
-    R[:, 7] = R[:, 6]
-    R[:, 8] = rotation_about_axis(x, -0.4 * s)
-    R[:, 10] = rotation_about_axis(x, 0.4 * s)
-    root = np.stack([0.1 * s, 0.95 + 0.02 * s, np.zeros(T)], -1)
-    joints = forward_kinematics(shape.offsets, root, R)
+    joints = swing_joints(shape, T)
     folder = tmp_path_factory.mktemp("case")
     bvh = write_bvh(folder / "swing.bvh", joints, 60.0, shape)
     synth = synthesize(
-        _Ref(Motion(joints=joints, fps=60.0, name="swing"), shape),
+        StubReference(Motion(joints=joints, fps=60.0, name="swing"), shape),
         settings=SynthSettings(
             fps=15.0,
             width=160,

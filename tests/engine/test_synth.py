@@ -5,47 +5,30 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
-from dataclasses import dataclass
 
 import cv2
 import numpy as np
 import pytest
 
-from engine.body.kinematics import forward_kinematics, rotation_about_axis
 from engine.body.shapes import BodyShape
 from engine.errors import InvalidInput
 from engine.render.camera import Camera
 from engine.synth import SynthSettings, synthesize
 from engine.types import Motion, Segments
 from tests.conftest import SHARED
+from tests.synthetic import StubReference, swing_joints
 
 SCORE = SHARED / "bench" / "score.py"
 AMP = 25.0
 
 
-@dataclass(frozen=True)
-class _Ref:
-    motion: Motion
-    shape: BodyShape
-
-
 @pytest.fixture(scope="module")
-def reference() -> _Ref:
+def reference() -> StubReference:
     """A 90-frame, 60 fps swing of arms and legs built with forward kinematics."""
     shape = BodyShape.default(1.75)
     T = 90
-    s = np.sin(np.linspace(0.0, 2.0 * np.pi, T))
-    R = np.broadcast_to(np.eye(3), (T, 12, 3, 3)).copy()
-    x, z = np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0])
-    R[:, 4] = rotation_about_axis(z, -1.2 + 0.6 * s)
-    R[:, 5] = rotation_about_axis(x, 0.8 + 0.5 * s) @ R[:, 4]
-    R[:, 6] = rotation_about_axis(z, 1.2 - 0.6 * s)
-    R[:, 7] = R[:, 6]
-    R[:, 8] = rotation_about_axis(x, -0.4 * s)
-    R[:, 10] = rotation_about_axis(x, 0.4 * s)
-    root = np.stack([0.2 * s, 0.95 + 0.02 * s, np.linspace(0, 0.3, T)], -1)
-    joints = forward_kinematics(shape.offsets, root, R)
-    return _Ref(Motion(joints=joints, fps=60.0, name="swing"), shape)
+    joints = swing_joints(shape, T, sway_m=0.2, travel_m=0.3)
+    return StubReference(Motion(joints=joints, fps=60.0, name="swing"), shape)
 
 
 SEGMENTS = Segments(starts=(0, 30, 60), end=89)
