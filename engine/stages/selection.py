@@ -42,6 +42,9 @@ class SelectionSettings:
         Normalised bandwidth beta_i / L_i around the segment diagonal (thesis 5.5.3: 25 %).
     boundary_window : int
         Half-width omega of the boundary search window, video frames (thesis 4.7.1 step 2).
+        2 measured best (mean boundary error, video frames, window 8 -> 2): P1 3.43 -> 1.93,
+        P2 4.00 -> 2.00, a synthetic 25 fps case 0.77 -> 0.27; stage 2's C is already close, and
+        a wide window lets the velocity condition latch onto a neighbouring direction change.
     smooth_threshold_deg : float
         Largest d_B between consecutive candidates of a "smooth" sequence (4.7.1 step 3).
     boundary_joints : tuple of str
@@ -94,7 +97,7 @@ class SelectionSettings:
 
     window_k: float = 10.0
     band: float = 0.25
-    boundary_window: int = 8
+    boundary_window: int = 2
     smooth_threshold_deg: float = 25.0
     boundary_joints: tuple[str, ...] = ("l_wrist", "r_wrist")
     direction_change_deg: float = 60.0
