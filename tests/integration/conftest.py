@@ -199,24 +199,12 @@ def short_video(tmp_path_factory) -> Path:
     src = CASE / "video.mp4"
     if not src.exists():
         pytest.skip(f"{CASE} is not beside the clone")
-    import cv2
+    from engine.io.encode import write_video
+    from engine.io.video import read_video
 
     out = tmp_path_factory.mktemp("video") / "short.mp4"
-    cap = cv2.VideoCapture(str(src))
-    fps = cap.get(cv2.CAP_PROP_FPS) or 30.0
-    writer = None
-    for _ in range(16):
-        ok, frame = cap.read()
-        for _skip in range(3):
-            cap.read()
-        if not ok:
-            break
-        if writer is None:
-            h, w = frame.shape[:2]
-            writer = cv2.VideoWriter(str(out), cv2.VideoWriter_fourcc(*"mp4v"), fps, (w, h))
-        writer.write(frame)
-    cap.release()
-    writer.release()
+    video = read_video(src, height=0, max_frames=64)
+    write_video(out, video.frames[::4][:16], video.fps)
     return out
 
 
