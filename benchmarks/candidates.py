@@ -264,6 +264,11 @@ def end_to_end(args: argparse.Namespace, settings: CandidateSettings) -> None:
         f"{[r.performer_start for r in sel.segments[1:]]})"
     )
     print(f"  selected == candidate 0 (BP best) in {np.mean(sel.selected == 0):.2f} of frames")
+    if args.dump:
+        np.savez_compressed(
+            args.dump, est_bones=est_b, true_bones=tb, est_eps=np.degrees(sel.posture_error),
+            true_eps=teps, joints=sel.joints, truth=gt, reference=ref.motion.joints[C0],
+        )  # fmt: skip
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -281,6 +286,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", help="--e2e: .npz cache of stage 3's candidates")
     ap.add_argument("--reuse", action="store_true", help="--e2e: reuse --out, run stage 4 only")
     ap.add_argument("--sel", nargs="*", default=[], help="--e2e: selection settings key=value")
+    ap.add_argument("--dump", help="--e2e: .npz of per-frame estimated and true errors")
     ap.add_argument("--no-image-cost", action="store_true", help="--e2e: thesis d_c = d_B only")
     args = ap.parse_args(argv)
     settings = CandidateSettings.thesis() if args.thesis else CandidateSettings()

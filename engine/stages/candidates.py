@@ -147,16 +147,26 @@ class CandidateSettings:
         W's coverage weight and its depth factor (``deep_k`` x radius counts as inside).
     estimator : str
         ``"bp"``: the thesis' BP (4.6.4) then the refinement. ``"in_plane"`` (beyond the
-        thesis, opt-in): no BP; the reference posture B_C(t') is refined by the pattern
-        search turning each part about the viewing direction only, against the image
-        likelihood + ``in_plane_prior`` d_B(., B_C(t')), and the candidates are its depth
-        flips. A silhouette sees in-plane directions and barely sees turns in depth, so the
-        estimate departs from the reference only where the image says so. On P1 with the true
-        C (every 3rd frame): rank correlation of eps_t' with the truth 0.73-0.81 against ~0
-        with BP, at ~0.1 s/frame instead of 0.7; but on P2 (another take) -0.48, so it is
-        not the default yet.
+        thesis): no BP; the reference posture B_C(t') is refined by the pattern search turning
+        each part about the viewing direction only, against the image likelihood +
+        ``in_plane_prior`` d_B(., B_C(t')), and the candidates are its depth flips. A
+        silhouette sees in-plane directions and barely sees turns in depth, so the estimate
+        departs from the reference only where the image says so. ``"hybrid"`` (default):
+        both; the first half of the candidates are the in-plane estimate and its flips, the
+        rest BP's. Measured with the whole pipeline (stages 0-2 cached, stage 4 default;
+        P1 / P2 / own synthetic case), rank correlation of eps_t' with the truth: BP 0.09 /
+        -0.06 / 0.73, in-plane 0.57 / -0.09 / 0.95, hybrid 0.57 / -0.11 / 0.91; selected E_3B
+        3.58 / 6.91 / 6.25, 3.59 / 7.01 / 5.30, 3.59 / 7.01 / 5.25 deg; best-candidate E_3B
+        3.49 / 6.72 / 4.35, 3.24 / 6.93 / 5.24, 3.46 / 6.69 / 4.06 deg. In-plane alone costs
+        0.08 s/frame, BP and hybrid ~0.5.
     in_plane_prior, in_plane_step0_deg, in_plane_sweeps : float, float, int
-        mu, first step and sweeps of the ``"in_plane"`` search.
+        mu, first step and sweeps of the in-plane search. mu 1 per radian: on P1 (pipeline)
+        mu 0.3 gave rank 0.48 and selected 3.82 deg, on P2 rank -0.62 and 7.83 deg.
+    in_plane_move_root : bool
+        Whether the ``"in_plane"`` search may also shift the root joint in the image. Off, the
+        root stays where stages 1-2 put it: the body region misses the dark shoes and some
+        hair, so on P1 with the true C and camera the shift moved the whole body 5.3 px down
+        (E_2P 4.55 px with it, 1.10 without).
     """
 
     n_samples: int = 40
@@ -188,10 +198,11 @@ class CandidateSettings:
     width_weight: float = 0.0
     coverage_weight: float = 1.0
     deep_k: float = 0.5
-    estimator: str = "bp"
-    in_plane_prior: float = 0.1
+    estimator: str = "hybrid"
+    in_plane_prior: float = 1.0
     in_plane_step0_deg: float = 8.0
     in_plane_sweeps: int = 10
+    in_plane_move_root: bool = False
 
     @classmethod
     def thesis(cls) -> CandidateSettings:
@@ -204,6 +215,7 @@ class CandidateSettings:
             refine_sweeps=0,
             lambda_e=1.0,
             prior_weight=0.0,
+            estimator="bp",
         )
 
     def validate(self) -> None:
@@ -215,9 +227,9 @@ class CandidateSettings:
             raise InvalidInput(f"settings.decrease must be in (0, 1], got {self.decrease}")
         if not 0.0 < self.a0 < 1.0:
             raise InvalidInput(f"settings.a0 must be in (0, 1), got {self.a0}")
-        if self.estimator not in ("bp", "in_plane"):
+        if self.estimator not in ("bp", "in_plane", "hybrid"):
             raise InvalidInput(
-                f"settings.estimator must be 'bp' or 'in_plane', got {self.estimator!r}"
+                f"settings.estimator must be 'bp', 'in_plane' or 'hybrid', got {self.estimator!r}"
             )
         if self.n_candidates < 1:
             raise InvalidInput(f"settings.n_candidates must be >= 1, got {self.n_candidates}")
@@ -410,12 +422,14 @@ def _refine(
     mu: float | None = None,
     step0_deg: float | None = None,
     sweeps: int | None = None,
+    move_root: bool = True,
 ) -> tuple[np.ndarray, float]:
     """Sub-pixel pattern search on d_S over subtree rotations and root shifts (thesis 6.4).
 
     With ``ref`` and ``s.bp_prior_weight`` (or ``mu``), the objective is BP's: d_S + mu
     d_B(., ref). ``in_plane`` turns parts about the viewing direction only (the directions a
-    silhouette can see), keeping the start's depth.
+    silhouette can see), keeping the start's depth. ``move_root`` False keeps the root joint
+    where it is.
     """
     if mu is None:
         mu = s.bp_prior_weight if ref is not None else 0.0
@@ -446,7 +460,7 @@ def _refine(
                 q = cur.copy()
                 q[sub] = J + (cur[sub] - J) @ R.T
                 samples.append(q)
-            if p == 0:
+            if p == 0 and move_root:
                 for vec in camera.R_cam_world[:2]:
                     for sg in (-1.0, 1.0):
                         samples.append(cur + sg * 0.5 * px * vec * max(step / np.radians(1), 0.5))
@@ -680,8 +694,11 @@ def estimate_candidates(
         else:
             orient_src = [ref, prev_best]
 
-    if s.estimator == "in_plane":
-        return _in_plane_candidates(scorer, pool, init, ref, d0, orient_src, camera, s, flags)
+    in_plane = None
+    if s.estimator in ("in_plane", "hybrid"):
+        in_plane = _in_plane_candidates(scorer, pool, init, ref, d0, orient_src, camera, s, flags)
+        if s.estimator == "in_plane":
+            return in_plane
 
     # initial samples: drawn from the initial postures weighted by their likelihood
     R0 = part_rotations(pool, offsets)  # (M, 12, 3, 3)
@@ -746,6 +763,9 @@ def estimate_candidates(
     starts = [q for q in pool[: len(init) + min(1, len(pool) - len(init))] if limits_ok(q)]
     if starts:
         cands = _append_distinct(cands, np.stack(starts), s.n_candidates)
+    if in_plane is not None:
+        keep = in_plane.candidates[: max(1, s.n_candidates // 2)]
+        cands = _append_distinct(keep, cands, s.n_candidates)
     d_s = scorer.full(cands)
     prior_cost = s.prior_weight * d_B(cands, ref)
     return FrameCandidates(cands, d_s, tuple(flags), np.asarray(history), prior_cost)
@@ -771,7 +791,7 @@ def _in_plane_candidates(
     start = init[-1]
     est, _ = _refine(
         scorer, start, camera, s, start, in_plane=True, mu=s.in_plane_prior,
-        step0_deg=s.in_plane_step0_deg, sweeps=s.in_plane_sweeps,
+        step0_deg=s.in_plane_step0_deg, sweeps=s.in_plane_sweeps, move_root=s.in_plane_move_root,
     )  # fmt: skip
     cands = generate_candidates(est, [start, *orient_src], camera, s)
     d_s = scorer.full(cands)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -20,7 +22,9 @@ from engine.stages.candidates import (
     limits_ok,
 )
 
-SMALL = CandidateSettings(n_samples=24, n_iterations=8, refine_sweeps=3, n_candidates=12)
+SMALL = CandidateSettings(
+    n_samples=24, n_iterations=8, refine_sweeps=3, n_candidates=12, estimator="bp"
+)
 SHAPE = BodyShape.default(1.75)
 
 
@@ -64,6 +68,24 @@ def test_flipped_forearm_is_among_candidates(flipped) -> None:
     err = np.linalg.norm(cam.project(fc.candidates) - cam.project(fc.candidates[0]), axis=-1)
     assert (err.max(axis=1) < 1e-6).sum() >= len(fc.candidates) - 1
     assert d_B(fc.candidates, init).min() <= 1e-6
+
+
+def test_hybrid_has_in_plane_estimate_first_and_bp_candidates(flipped) -> None:
+    truth, init, cam, _ = flipped
+    r = render(truth, SHAPE, cam)
+    hybrid = replace(SMALL, estimator="hybrid")
+    fc = estimate_candidates(
+        r.silhouette, r.edges, cam, SHAPE, init, settings=hybrid, rng=np.random.default_rng(3)
+    )
+    in_plane = estimate_candidates(
+        r.silhouette, r.edges, cam, SHAPE, init, settings=replace(SMALL, estimator="in_plane"),
+        rng=np.random.default_rng(3),
+    )  # fmt: skip
+    assert len(fc.candidates) <= hybrid.n_candidates
+    np.testing.assert_allclose(fc.candidates[0], in_plane.candidates[0])
+    # the depth flip is found by BP's half of the set
+    assert np.degrees(d_B(fc.candidates, truth).min()) < 5.0
+    assert limits_ok(fc.candidates).all()
 
 
 def test_candidates_respect_joint_limits(flipped) -> None:
@@ -139,7 +161,8 @@ def test_bp_prior_keeps_the_estimate_near_the_reference_under_model_mismatch() -
     err = {}
     for mu in (0.0, 2.0):
         s = CandidateSettings(
-            n_samples=16, n_iterations=4, refine_sweeps=4, n_candidates=4, bp_prior_weight=mu
+            n_samples=16, n_iterations=4, refine_sweeps=4, n_candidates=4, bp_prior_weight=mu,
+            estimator="bp",
         )
         fc = estimate_candidates(
             r.silhouette, r.edges, cam, SHAPE, truth, settings=s, rng=np.random.default_rng(0)
