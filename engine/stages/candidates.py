@@ -74,9 +74,17 @@ ALL_PARTS = tuple(range(N_PARTS))
 class CandidateSettings:
     """Tuning of stage 3 (thesis 4.6, 5.2.2).
 
-    Defaults are the cheaper settings found with ``benchmarks/candidates.py`` at equal
-    accuracy; :meth:`thesis` gives the thesis' own (lambda 0.9, 40 iterations, 300 samples per
-    part, 50 candidates; 5.2.2).
+    :meth:`thesis` gives the thesis' own (lambda 0.9, 40 iterations, 300 samples per part, 50
+    candidates; 5.2.2). The defaults are cheaper and NOT as accurate on the synthetic
+    experiment 5.2 (``NUMBA_NUM_THREADS=1 benchmarks/candidates.py --frames 50``, BP alone,
+    E_3B mean deg / E_2P px / s per frame): thesis 6.45 / 1.86 / 5.5, thesis with the
+    refinement 6.13 / 1.80 / 5.5, thesis with 100 samples 7.01 / 1.98 / 1.6, 100 samples and
+    20 iterations 6.97 / 2.15 / 1.0, these defaults 8.55 / 2.61 / 0.6 (8.75 with the thesis'
+    lambda_E = 1 and no refinement). Accuracy grows with samples x iterations and no cheaper
+    setting matched the thesis'. The defaults were kept because on the public videos the
+    body-model mismatch, not the search, limits stage 3 (more samples did not change P1's
+    figures, see ``benchmarks/candidates.py --case``), and they keep a whole analysis near
+    0.5 s per video frame.
 
     Attributes
     ----------
