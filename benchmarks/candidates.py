@@ -263,7 +263,7 @@ def end_to_end(args: argparse.Namespace, settings: CandidateSettings) -> None:
         f"{[r.initial_performer_start for r in sel.segments[1:]]}, found "
         f"{[r.performer_start for r in sel.segments[1:]]})"
     )
-    print(f"  selected == candidate 0 (BP best) in {np.mean(sel.selected == 0):.2f} of frames")
+    print(f"  selected == candidate 0 (1st estimate) in {np.mean(sel.selected == 0):.2f} of frames")
     if args.dump:
         np.savez_compressed(
             args.dump, est_bones=est_b, true_bones=tb, est_eps=np.degrees(sel.posture_error),
