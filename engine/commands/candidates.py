@@ -1,10 +1,11 @@
-"""`coach candidates REF.bvh VIDEO --frames 10:40 --truth CASE/truth.json --out cand.json`.
+"""`coach candidates REF.bvh VIDEO --frames 10:40 --out cand.json [--plot cand.png]`: stage 3 alone.
 
-Runs stage 0 (foreground) on the video, takes C(t') and the camera from ``--truth`` (so stage 3
-can be judged alone), then stage 3 (thesis 4.6) on the chosen frames. Writes the DESIGN.md
-result format for those frames (joints_3d = lowest-cost candidate; the capsule radii are
-first fitted to the frame-0 silhouette, see ``engine.stages.calibration.fit_body_shape``)
-and optionally a plot of all candidates per frame from the front and the side (thesis fig. 4.11).
+Runs stages 0-2 on the whole video (:func:`engine.pipeline.prepare`: foreground, camera,
+C(t')), then stage 3 (thesis 4.6) on the chosen frames, and writes the DESIGN.md result format
+for those frames (joints_3d = the lowest-cost candidate, errors against the reference at C(t'))
+so ``../shared/bench/score.py`` reads it; ``--plot`` draws all candidates per frame from the
+front and the side (thesis fig. 4.11). With ``--truth CASE/truth.json`` (a bench case), C(t')
+and the camera come from the truth instead, so stage 3 is judged alone.
 """
 
 from __future__ import annotations
@@ -12,11 +13,19 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from engine.errors import InvalidInput
+
+if TYPE_CHECKING:
+    from engine.body.shapes import BodyShape
+    from engine.io.bvh import Reference
+    from engine.render.camera import Camera
+    from engine.settings import Settings
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -27,6 +36,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--plot", type=Path)
     p.add_argument("--truth", type=Path, help="truth.json: take C(t') and the camera from it")
+    p.add_argument("--fast", action="store_true", help="the 'fast' settings preset")
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(func=run)
 
@@ -42,51 +52,104 @@ def _frames(spec: str, n: int) -> range:
     return r
 
 
-def run(args: argparse.Namespace) -> int:
+@dataclass
+class _Inputs:
+    """What stage 3 needs for the chosen frames, from stages 0-2 or from a bench truth."""
+
+    reference: Reference
+    n_video: int
+    fps: float
+    silhouettes: np.ndarray  # (N, H, W) bool, the chosen frames
+    edges: np.ndarray  # (N, H, W) bool
+    camera: Camera  # working resolution
+    camera_file: Camera  # the same camera in the video file's pixels
+    shape: BodyShape
+    C: np.ndarray  # (N,) reference frame per chosen video frame
+    initial: np.ndarray  # (N, M, 17, 3) initial postures, the reference's first
+    timing: dict
+
+
+def _from_truth(
+    args: argparse.Namespace, frames_spec: str, settings: Settings
+) -> tuple[_Inputs, range]:
     from engine.io.bvh import load_reference, sample_reference
     from engine.io.video import read_video
-    from engine.measures import bone_angles
     from engine.render.camera import Camera
     from engine.stages.calibration import fit_body_shape
-    from engine.stages.candidates import CandidateSettings, estimate_candidates
     from engine.stages.foreground import extract_foreground
 
     t0 = time.perf_counter()
-    if args.truth is None:
-        raise InvalidInput("--truth is required for now (stages 1-2 are not wired in yet)")
     truth = json.loads(Path(args.truth).read_text())
     ref = load_reference(args.reference)
-    video = read_video(args.video)
-    frames = _frames(args.frames, video.frames.shape[0])
-    fg = extract_foreground(video.frames)
-    t_fg = time.perf_counter() - t0
     camera = Camera.from_dict(truth["camera"])
-    settings = CandidateSettings()
+    video = read_video(args.video, height=camera.height)
+    frames = _frames(frames_spec, video.frames.shape[0])
+    fg = extract_foreground(video.frames, settings.foreground)
     # the performer's girth from the calibration frame, where the posture is the reference's
     c0 = float(truth["frames"][0]["reference_frame"])
     shape, _ = fit_body_shape(
         sample_reference(ref, np.array([c0]))[0], ref.shape, camera, fg.silhouettes[0]
     )
-    rng = np.random.default_rng(args.seed)
-    out_frames, prev, all_cands = [], None, []
+    idx = np.asarray(frames)
+    C = np.array([float(truth["frames"][t]["reference_frame"]) for t in idx])
+    inputs = _Inputs(
+        ref, int(video.frames.shape[0]), float(video.fps), fg.silhouettes[idx], fg.edges[idx],
+        camera, camera, shape, C, sample_reference(ref, C)[:, None],
+        {"foreground": time.perf_counter() - t0},
+    )  # fmt: skip
+    return inputs, frames
+
+
+def _from_stages(
+    args: argparse.Namespace, frames_spec: str, settings: Settings
+) -> tuple[_Inputs, range]:
+    from engine.io.bvh import load_reference
+    from engine.pipeline import original_pixels, prepare
+
+    p = prepare(args.reference, args.video, settings)
+    frames = _frames(frames_spec, p.n_frames)
+    idx = np.asarray(frames)
+    v = p.video
+    inputs = _Inputs(
+        load_reference(args.reference), p.n_frames, float(v["fps"]), p.silhouettes[idx],
+        p.edges[idx], p.camera, original_pixels(p.camera, v["original_width"],
+        v["original_height"]), p.shape, p.C[idx].astype(float), p.initial_postures(frames),
+        dict(p.timing_s),
+    )  # fmt: skip
+    return inputs, frames
+
+
+def run(args: argparse.Namespace) -> int:
+    from engine.body.skeleton import JOINTS
+    from engine.io.bvh import sample_reference
+    from engine.measures import bone_angles
+    from engine.settings import Settings
+    from engine.stages.candidates import estimate_candidates_chunk
+
+    for name in ("reference", "video"):
+        if not Path(getattr(args, name)).exists():
+            raise InvalidInput(f"{name}: {getattr(args, name)} does not exist")
+    t0 = time.perf_counter()
+    settings = Settings.from_dict({"preset": "fast" if args.fast else "default"})
+    source = _from_truth if args.truth is not None else _from_stages
+    x, frames = source(args, args.frames, settings)
     t1 = time.perf_counter()
-    for t in frames:
-        c = float(truth["frames"][t]["reference_frame"])
-        init = sample_reference(ref, np.array([c]))[0]
-        fc = estimate_candidates(
-            fg.silhouettes[t], fg.edges[t], camera, shape, init,
-            settings=settings, rng=rng, prev=prev,
-        )  # fmt: skip
-        prev = fc
+    fcs = estimate_candidates_chunk(
+        x.silhouettes, x.edges, x.camera, x.shape, x.initial, settings=settings.candidates,
+        rng=np.random.default_rng(args.seed),
+    )  # fmt: skip
+    t_c = time.perf_counter() - t1
+    out_frames = []
+    ref_at_C = sample_reference(x.reference, x.C)
+    for t, c, init, fc in zip(frames, x.C, ref_at_C, fcs, strict=True):
         k = int(np.argmin(fc.cost))
         best = fc.candidates[k]
         ang = np.degrees(bone_angles(init, best))
-        all_cands.append(fc.candidates)
         out_frames.append({
             "t": t,
-            "reference_frame": int(round(c)),
+            "reference_frame": int(round(float(c))),
             "joints_3d": best.tolist(),
-            "joints_2d": camera.project(best).tolist(),
+            "joints_2d": x.camera_file.project(best).tolist(),
             "candidates": fc.candidates.tolist(),
             "selected": k,
             "posture_error_deg": float(ang.mean()),
@@ -94,24 +157,22 @@ def run(args: argparse.Namespace) -> int:
             "flags": list(fc.flags),
             "d_s": fc.d_s.tolist(),
         })  # fmt: skip
-    t_c = time.perf_counter() - t1
-    from engine.body.skeleton import JOINTS
-
+    motion = x.reference.motion
     result = {
         "version": 1,
-        "reference": {"name": ref.motion.name, "frames": ref.motion.frames, "fps": ref.motion.fps},
-        "video": {"frames": int(video.frames.shape[0]), "fps": float(video.fps),
-                  "width": int(video.frames.shape[2]), "height": int(video.frames.shape[1])},
+        "reference": {"name": motion.name, "frames": motion.frames, "fps": motion.fps},
+        "video": {"frames": x.n_video, "fps": x.fps, "width": x.camera_file.width,
+                  "height": x.camera_file.height},
         "joints": list(JOINTS),
-        "camera": camera.to_dict(),
+        "camera": x.camera_file.to_dict(),
         "frames": out_frames,
         "segments": [],
-        "timing_s": {"foreground": t_fg, "candidates": t_c, "total": time.perf_counter() - t0},
+        "timing_s": {**x.timing, "candidates": t_c, "total": time.perf_counter() - t0},
     }  # fmt: skip
     args.out.write_text(json.dumps(result))
     print(f"{len(out_frames)} frames, {t_c / len(out_frames):.2f} s/frame -> {args.out}")
     if args.plot:
-        _plot(all_cands, list(frames), camera, args.plot)
+        _plot([f.candidates for f in fcs], list(frames), x.camera, args.plot)
     return 0
 
 

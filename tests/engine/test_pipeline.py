@@ -122,3 +122,45 @@ def test_frames_the_video_does_not_confirm_are_flagged():
     assert [("image_misfit" in f) for f in out.flags] == [False, False, True, True]
     assert any("2 of 4 frames" in m for m in out.messages)
     assert flag_image_misfit(sel, d_s, 1.0) is sel
+
+
+def test_candidates_command_runs_stages_0_to_3_and_writes_a_scorable_result(
+    case_dir, tmp_path, capsys
+) -> None:
+    import json
+
+    from engine.cli import main
+
+    out, png = tmp_path / "cand.json", tmp_path / "cand.png"
+    args = [case_dir["reference"], case_dir["video"], "--frames", "3:6"]
+    assert main(["candidates", *args, "--out", str(out), "--plot", str(png)]) == 0
+    doc = json.loads(out.read_text())
+    assert [f["t"] for f in doc["frames"]] == [3, 4, 5]
+    for f in doc["frames"]:
+        assert 0 <= f["selected"] < len(f["candidates"])
+        assert f["joints_3d"] == f["candidates"][f["selected"]]
+        assert len(f["bone_errors_deg"]) == 16 and len(f["joints_2d"]) == 17
+    # C from stage 2 follows the truth's correspondence within a few reference frames
+    truth = json.loads(open(case_dir["truth"]).read())
+    true_c = [truth["frames"][f["t"]]["reference_frame"] for f in doc["frames"]]
+    err = [abs(f["reference_frame"] - c) for f, c in zip(doc["frames"], true_c, strict=True)]
+    assert max(err) <= 8, err
+    assert png.stat().st_size > 5_000
+    # with the truth, C(t') is the truth's
+    assert main(["candidates", *args, "--out", str(out), "--truth", case_dir["truth"]]) == 0
+    doc = json.loads(out.read_text())
+    for f in doc["frames"]:
+        assert f["reference_frame"] == round(truth["frames"][f["t"]]["reference_frame"])
+
+
+def test_candidates_command_bad_input_is_one_line_error(case_dir, tmp_path, capsys) -> None:
+    from engine.cli import main
+
+    out = str(tmp_path / "c.json")
+    assert main(["candidates", case_dir["reference"], "missing.mp4", "--out", out]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    bad = ["candidates", case_dir["reference"], case_dir["video"], "--out", out, "--fast"]
+    assert main([*bad, "--frames", "x:y"]) == 2
+    assert "--frames" in capsys.readouterr().err
+    assert main([*bad, "--frames", "500:600"]) == 2
+    assert "selects no frame" in capsys.readouterr().err
