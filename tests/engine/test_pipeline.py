@@ -132,7 +132,7 @@ def test_candidates_command_runs_stages_0_to_3_and_writes_a_scorable_result(
     from engine.cli import main
 
     out, png = tmp_path / "cand.json", tmp_path / "cand.png"
-    args = [case_dir["reference"], case_dir["video"], "--frames", "3:6"]
+    args = [case_dir["reference"], case_dir["video"], "--frames", "3:6", "--fast"]
     assert main(["candidates", *args, "--out", str(out), "--plot", str(png)]) == 0
     doc = json.loads(out.read_text())
     assert [f["t"] for f in doc["frames"]] == [3, 4, 5]
