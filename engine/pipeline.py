@@ -280,8 +280,9 @@ def candidates(
 ) -> CandidateChunk:
     """Stage 3 (thesis 4.6) on ``frames`` (all by default).
 
-    The random stream depends only on the seed and the chunk's first frame, so the same
-    chunking gives the same candidates on any worker, in any order.
+    Each frame has its own random stream (from the seed and its frame number), so with the
+    default ``candidates.n_prev`` 0 a frame's candidates are the same whichever chunk computes
+    it, on any worker, in any order.
     """
     from engine.stages.candidates import estimate_candidates_chunk
 
@@ -294,7 +295,7 @@ def candidates(
     out = estimate_candidates_chunk(
         prepared.silhouettes[idx], prepared.edges[idx], prepared.camera, prepared.shape,
         prepared.initial_postures(frames), settings=s.candidates,
-        rng=np.random.default_rng([s.seed, frames.start]), on_progress=on_progress,
+        rng=[np.random.default_rng([s.seed, int(t)]) for t in idx], on_progress=on_progress,
     )  # fmt: skip
     return CandidateChunk(
         frames=idx, candidates=[f.candidates for f in out], d_s=[f.d_s for f in out],

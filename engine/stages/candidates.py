@@ -29,7 +29,7 @@ the previous-frame seeds and the benchmark's "selected" posture.
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -129,7 +129,12 @@ class CandidateSettings:
     occluded_visible_fraction : float
         A part with less than this fraction of its pixels visible is totally occluded (6.5).
     n_prev : int
-        Previous-frame candidates used as extra initial postures (6.7).
+        Previous-frame candidates used as extra initial postures (6.7). 0 by default: it changed
+        nothing that matters on the bench cases (``benchmarks/estimators.py``, hybrid, 3 -> 0:
+        P1 best E_3B 3.46 -> 3.49, rank 0.57 -> 0.57; P2 6.69 -> 6.72, -0.08 -> -0.10; own
+        synthetic case 3.99 -> 3.80, 0.89 -> 0.86), and without it every frame depends only on
+        its own image and random stream, so the candidates do not depend on how the video
+        is cut into chunks for the workers.
     far_margin : float
         The reference is "far" when its d_S exceeds the previous best candidate's by this.
     prior_weight : float
@@ -198,7 +203,7 @@ class CandidateSettings:
     n_candidates: int = 25
     min_flip_deg: float = 5.0
     occluded_visible_fraction: float = 0.05
-    n_prev: int = 3
+    n_prev: int = 0
     far_margin: float = 0.05
     prior_weight: float = 0.5
     bp_prior_weight: float = 0.0
@@ -815,7 +820,7 @@ def estimate_candidates_chunk(
     initial_joints: np.ndarray,
     *,
     settings: CandidateSettings | None = None,
-    rng: np.random.Generator,
+    rng: np.random.Generator | Sequence[np.random.Generator],
     prev: FrameCandidates | None = None,
     on_progress: Callable[[str, float], None] | None = None,
 ) -> list[FrameCandidates]:
@@ -827,8 +832,11 @@ def estimate_candidates_chunk(
     camera : Camera
     shape : BodyShape
     initial_joints : ndarray, shape (N, 17, 3) or (N, M, 17, 3)
-    settings, rng, prev
+    settings, prev
         As :func:`estimate_candidates`; ``prev`` is the frame before the chunk.
+    rng : numpy.random.Generator, or a sequence of N of them
+        One stream for the chunk, or one per frame (then, with ``settings.n_prev`` 0, each
+        frame's candidates are independent of the chunk it is computed in).
     on_progress : callable (stage, fraction), optional
 
     Returns
@@ -844,10 +852,13 @@ def estimate_candidates_chunk(
         raise InvalidInput(
             f"initial_joints must have one entry per frame ({sils.shape[0]}), got {init.shape[0]}"
         )
+    rngs = [rng] * sils.shape[0] if isinstance(rng, np.random.Generator) else list(rng)
+    if len(rngs) != sils.shape[0]:
+        raise InvalidInput(f"rng must be one generator or one per frame ({sils.shape[0]})")
     out = []
     for t in range(sils.shape[0]):
         prev = estimate_candidates(
-            sils[t], edges[t], camera, shape, init[t], settings=settings, rng=rng, prev=prev
+            sils[t], edges[t], camera, shape, init[t], settings=settings, rng=rngs[t], prev=prev
         )
         out.append(prev)
         if on_progress is not None:

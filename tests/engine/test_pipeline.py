@@ -96,6 +96,19 @@ def test_candidate_chunk_round_trip_and_select(prepared, tmp_path) -> None:
         select(prepared, chunks[:1], SETTINGS)
 
 
+def test_candidates_do_not_depend_on_the_chunking(prepared) -> None:
+    # one chunk or three: every frame gets the same candidates (per-frame random streams)
+    whole = candidates(prepared, range(2, 8), SETTINGS)
+    parts = [candidates(prepared, r, SETTINGS) for r in (range(2, 3), range(3, 6), range(6, 8))]
+    cut = [k for c in parts for k in c.candidates]
+    assert len(cut) == len(whole.candidates) == 6
+    for a, b in zip(whole.candidates, cut, strict=True):
+        np.testing.assert_array_equal(a, b)
+    # the previous frame's candidates as extra starts (6.7) still work, threaded within a chunk
+    prev = {**SETTINGS, "candidates": {**SETTINGS["candidates"], "n_prev": 3}}
+    assert candidates(prepared, range(2, 8), prev).frames.tolist() == list(range(2, 8))
+
+
 def test_analyze_gives_a_valid_result(case_dir) -> None:
     doc = analyze(case_dir["reference"], case_dir["video"], SETTINGS)
     validate_result(doc)
