@@ -292,6 +292,22 @@ def _lab_to_rgb(lab: np.ndarray) -> np.ndarray:
     return np.clip(rgb * 255 + 0.5, 0, 255).astype(np.uint8)
 
 
+def _grabcut(bgr: np.ndarray, labels: np.ndarray, iterations: int) -> bool:
+    """``cv2.grabCut`` from a label mask, in place on ``labels`` (H, W); False if it failed.
+
+    GrabCut's colour models start from k-means seeded by OpenCV's per-thread global RNG, which
+    every call advances: without resetting it, a video's silhouettes depended on what the
+    process had segmented before (a worker's previous jobs).
+    """
+    bgd, fgd = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
+    cv2.setRNGSeed(0)
+    try:
+        cv2.grabCut(bgr, labels, _NO_RECT, bgd, fgd, iterations, cv2.GC_INIT_WITH_MASK)
+    except cv2.error:
+        return False
+    return True
+
+
 def _grabcut_full_height(
     frame: np.ndarray, coarse: np.ndarray, strong: np.ndarray, *, scale: float = 0.5
 ) -> np.ndarray:
@@ -312,10 +328,7 @@ def _grabcut_full_height(
     gc[cv2.resize(sure, (ws, hs), interpolation=cv2.INTER_NEAREST) > 0] = cv2.GC_FGD
     if not (gc == cv2.GC_BGD).any():
         return coarse
-    bgd, fgd = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
-    try:
-        cv2.grabCut(img, gc, _NO_RECT, bgd, fgd, 3, cv2.GC_INIT_WITH_MASK)
-    except cv2.error:
+    if not _grabcut(img, gc, 3):
         return coarse
     m = ((gc == cv2.GC_FGD) | (gc == cv2.GC_PR_FGD)).astype(np.uint8)
     return cv2.resize(m, (w, h), interpolation=cv2.INTER_NEAREST) > 0
@@ -390,12 +403,8 @@ def grabcut_seeded(frame: np.ndarray, labels: np.ndarray, *, iterations: int = 2
     has_bg = np.any((gc == cv2.GC_BGD) | (gc == cv2.GC_PR_BGD))
     if not has_bg or not fallback.any():
         return fallback
-    bgd, fgd = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
-    try:
-        cv2.grabCut(np.ascontiguousarray(frame[..., ::-1]), gc, _NO_RECT, bgd, fgd, iterations,
-                    cv2.GC_INIT_WITH_MASK)  # fmt: skip
-    except cv2.error:  # degenerate colour model (e.g. uniform crop): keep the trimap
-        return fallback
+    if not _grabcut(np.ascontiguousarray(frame[..., ::-1]), gc, iterations):
+        return fallback  # degenerate colour model (e.g. uniform crop): keep the trimap
     return (gc == cv2.GC_FGD) | (gc == cv2.GC_PR_FGD)
 
 

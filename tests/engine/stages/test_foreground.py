@@ -98,3 +98,16 @@ def test_synthetic_case_matches_rendered_truth():
     assert iou.mean() >= 0.9, np.round(iou, 3)
     assert iou.min() >= 0.85, np.round(iou, 3)
     assert not any("no_person" in f for f in fg.flags)
+
+
+def test_silhouettes_do_not_depend_on_what_ran_before():
+    # GrabCut seeds k-means from OpenCV's global RNG; a worker that segmented other videos
+    # before must still get the same silhouettes (P2's first frames need GrabCut)
+    from engine.io.video import read_video
+
+    frames = read_video(BENCH_CASES / "P2_take_64_30_vs_64_29" / "video.mp4", max_frames=40).frames
+    first = extract_foreground(frames).silhouettes
+    cv2.setRNGSeed(12345)
+    cv2.kmeans(np.random.default_rng(0).random((50, 3), np.float32), 3, None,
+               (cv2.TERM_CRITERIA_MAX_ITER, 5, 0), 2, cv2.KMEANS_RANDOM_CENTERS)  # fmt: skip
+    np.testing.assert_array_equal(extract_foreground(frames).silhouettes, first)
