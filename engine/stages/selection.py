@@ -42,9 +42,11 @@ class SelectionSettings:
         Normalised bandwidth beta_i / L_i around the segment diagonal (thesis 5.5.3: 25 %).
     boundary_window : int
         Half-width omega of the boundary search window, video frames (thesis 4.7.1 step 2).
-        2 measured best (mean boundary error, video frames, window 8 -> 2): P1 3.43 -> 1.93,
-        P2 4.00 -> 2.00, a synthetic 25 fps case 0.77 -> 0.27; stage 2's C is already close, and
-        a wide window lets the velocity condition latch onto a neighbouring direction change.
+        Stage 2's C is already close, and a wide window lets the velocity condition latch onto
+        a neighbouring direction change. Mean boundary error (video frames), window 8 -> 2
+        with BP candidates: P1 3.43 -> 1.93, P2 4.00 -> 2.00, a synthetic 25 fps case 0.77 ->
+        0.27. With the hybrid stage 3, window 2 -> 1 (= 0 on all four): P1 1.93 -> 1.43, P1
+        at 15 fps 2.22 -> 1.22, P2 1.50 -> 1.50, synthetic 0.47 -> 0.27.
     smooth_threshold_deg : float
         Largest d_B between consecutive candidates of a "smooth" sequence (4.7.1 step 3).
     boundary_joints : tuple of str
@@ -97,7 +99,7 @@ class SelectionSettings:
 
     window_k: float = 10.0
     band: float = 0.25
-    boundary_window: int = 2
+    boundary_window: int = 1
     smooth_threshold_deg: float = 25.0
     boundary_joints: tuple[str, ...] = ("l_wrist", "r_wrist")
     direction_change_deg: float = 60.0
