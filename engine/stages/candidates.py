@@ -166,12 +166,12 @@ class CandidateSettings:
         silhouette sees in-plane directions and barely sees turns in depth, so the estimate
         departs from the reference only where the image says so. ``"hybrid"`` (default):
         both; the first half of the candidates are the in-plane estimate and its flips, the
-        rest BP's. Measured with the whole pipeline (stages 0-2 cached, stage 4 default;
-        P1 / P2 / own synthetic case), rank correlation of eps_t' with the truth: BP 0.09 /
-        -0.06 / 0.73, in-plane 0.57 / -0.09 / 0.95, hybrid 0.57 / -0.11 / 0.91; selected E_3B
-        3.58 / 6.91 / 6.25, 3.59 / 7.01 / 5.30, 3.59 / 7.01 / 5.25 deg; best-candidate E_3B
-        3.49 / 6.72 / 4.35, 3.24 / 6.93 / 5.24, 3.46 / 6.69 / 4.06 deg. In-plane alone costs
-        0.08 s/frame, BP and hybrid ~0.5.
+        rest BP's. ``benchmarks/estimators.py`` (whole pipeline, scorer figures), P1 / P2:
+        rank correlation of eps_t' with the truth BP 0.09 / 0.09, in-plane 0.50 / -0.06,
+        hybrid 0.50 / -0.06; selected E_3B 3.71 / 6.90, 3.68 / 6.93, 3.68 / 6.93 deg;
+        best-candidate E_3B 3.60 / 6.69, 3.33 / 6.87, 3.57 / 6.67 deg. On our own synthetic
+        case (``coach synth``) rank BP 0.73, in-plane 0.95, hybrid 0.91. In-plane alone costs
+        0.06 s/frame, BP and hybrid ~0.4.
     in_plane_prior, in_plane_step0_deg, in_plane_sweeps : float, float, int
         mu, first step and sweeps of the in-plane search. mu 1 per radian: on P1 (pipeline)
         mu 0.3 gave rank 0.48 and selected 3.82 deg, on P2 rank -0.62 and 7.83 deg.
