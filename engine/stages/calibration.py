@@ -56,10 +56,12 @@ class CalibrationSettings:
         PCA lengths are biased by a mesh body wider than the capsules).
     above_ankles : bool
         Finish with a d_A fit over the rows above the ankles only
-        (:func:`_refine_above_ankles`): P1 scale -3.1 % -> -1.1 %, P2 -5.5 % -> -1.7 %.
-        Off by default for now: stage 2 compares whole silhouettes that lack the shoes in
-        every frame, and the shorter (wrong) camera matches them better (P1 temporal error
-        0.83 -> 0.91 video frames with it on; P2 1.84 -> 1.80).
+        (:func:`_refine_above_ankles`): P1 scale -3.1 % -> -2.1 % (-1.1 % measured once with
+        another GrabCut initialisation; over GrabCut seeds 0-6 it ranged -2.6 ... +1.9 %, the
+        plain camera -3.1 ... +1.4 %), P2 -5.5 % -> -1.7 %. Off by default for now: stage 2
+        compares whole silhouettes that lack the shoes in every frame, and the shorter (wrong)
+        camera matches them better (P1 temporal error 0.83 -> 0.91 video frames with it on; P2
+        1.84 -> 1.80).
     fit_width : bool
         After the camera, fit the performer's capsule radii per part group
         (:func:`fit_body_shape`; used by :func:`engine.stages.run_stages_0_2_full`).

@@ -292,6 +292,9 @@ def _lab_to_rgb(lab: np.ndarray) -> np.ndarray:
     return np.clip(rgb * 255 + 0.5, 0, 255).astype(np.uint8)
 
 
+_GRABCUT_SEED = 0
+
+
 def _grabcut(bgr: np.ndarray, labels: np.ndarray, iterations: int) -> bool:
     """``cv2.grabCut`` from a label mask, in place on ``labels`` (H, W); False if it failed.
 
@@ -300,7 +303,7 @@ def _grabcut(bgr: np.ndarray, labels: np.ndarray, iterations: int) -> bool:
     process had segmented before (a worker's previous jobs).
     """
     bgd, fgd = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
-    cv2.setRNGSeed(0)
+    cv2.setRNGSeed(_GRABCUT_SEED)
     try:
         cv2.grabCut(bgr, labels, _NO_RECT, bgd, fgd, iterations, cv2.GC_INIT_WITH_MASK)
     except cv2.error:
