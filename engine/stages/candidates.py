@@ -13,11 +13,19 @@ previous frame's candidates), the stage
 3. resets totally occluded parts to the reference and flags them ``occluded:<joint>`` (6.5);
 4. generates candidates (4.6.5): the reference's depth orientation per part, then flips of
    n = 1, 2, ... parts about their parent joints (mirror in depth, same projection), dropping
-   those that break the joint limits; the previous frame's best candidate supplies another
-   orientation and, when the reference is far from the image, the initial estimate (6.7).
+   those that break the joint limits; the previous frame's best candidate (``n_prev`` > 0)
+   supplies another orientation and, when the reference is far from the image, the initial
+   estimate (6.7).
 
-Frames are independent given stage 2's output, so workers can fan out over frames; the chunk
-helper only threads the previous frame's candidates through.
+Beyond the thesis, the default ``estimator="hybrid"`` also fits the reference posture in the
+image plane only (each part turned about the viewing direction, the root kept, a prior towards
+B_C(t')) and puts that estimate and its depth flips first: a silhouette sees in-plane bends and
+hardly sees turns in depth, where BP alone drifts (see :class:`CandidateSettings`).
+
+Frames are independent given stage 2's output, so workers can fan out over frames; with one
+random stream per frame and ``n_prev`` 0 (the defaults) a frame's candidates do not depend on
+the chunk that computes it. The chunk helper threads the previous frame's candidates through
+when ``n_prev`` > 0.
 
 Every candidate carries its d_S; stage 4 weighs it against the distance to the reference
 (:attr:`engine.stages.selection.SelectionSettings.image_weight`), so the initial postures
