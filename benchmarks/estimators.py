@@ -13,23 +13,13 @@ correlation of eps_t' and stage 3's seconds per frame.
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import time
 from pathlib import Path
 
+from half_rate import load_scorer  # benchmarks/ is on sys.path when run as a script
+
 from engine.pipeline import Prepared, candidates, prepare, select
-
-REPO = Path(__file__).resolve().parents[1]
-SCORER = REPO.parent / "shared" / "bench" / "score.py"
-
-
-def load_scorer():
-    spec = importlib.util.spec_from_file_location("bench_score", SCORER)
-    mod = importlib.util.module_from_spec(spec)
-    assert spec.loader is not None
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def prepared_for(case: Path, cache: Path) -> Prepared:
@@ -49,7 +39,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cache", type=Path, default=Path("/tmp/coach-estimators"))
     args = ap.parse_args(argv)
     args.cache.mkdir(parents=True, exist_ok=True)
-    scorer = load_scorer()
+    scorer = load_scorer(args.cases[0])
     extra = {k: json.loads(v) for k, v in (kv.split("=", 1) for kv in args.set)}
     keys = (
         ("temporal", "temporal_err_video_frames"),
