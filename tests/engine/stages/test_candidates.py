@@ -174,3 +174,40 @@ def test_bp_prior_keeps_the_estimate_near_the_reference_under_model_mismatch() -
 def test_estimator_must_be_known():
     with pytest.raises(InvalidInput, match="estimator"):
         CandidateSettings(estimator="nope").validate()
+
+
+def test_in_plane_keeps_the_root_unless_allowed_to_move_it() -> None:
+    truth = _posture(0.0)
+    cam = _camera(truth)
+    shifted = truth + np.array([3.0, 0.0, 0.0]) / cam.scale  # the body 3 px to the right
+    r = render(shifted, SHAPE, cam)
+    s = replace(SMALL, estimator="in_plane", in_plane_prior=0.0)
+    kept = estimate_candidates(
+        r.silhouette, r.edges, cam, SHAPE, truth, settings=s, rng=np.random.default_rng(0)
+    )
+    np.testing.assert_allclose(kept.candidates[0][0], truth[0])
+    moved = estimate_candidates(
+        r.silhouette, r.edges, cam, SHAPE, truth,
+        settings=replace(s, in_plane_move_root=True), rng=np.random.default_rng(0),
+    )  # fmt: skip
+    shift_px = (cam.project(moved.candidates[0]) - cam.project(truth))[0, 0]
+    assert 1.5 < shift_px < 4.5, shift_px
+
+
+def test_chunk_needs_one_generator_or_one_per_frame() -> None:
+    from engine.stages.candidates import estimate_candidates_chunk
+
+    truth = _posture(0.0)
+    cam = _camera(truth)
+    r = render(truth, SHAPE, cam)
+    sils, edges = np.stack([r.silhouette] * 2), np.stack([r.edges] * 2)
+    init = np.stack([truth] * 2)
+    with pytest.raises(InvalidInput, match="one per frame"):
+        estimate_candidates_chunk(
+            sils, edges, cam, SHAPE, init, settings=SMALL, rng=[np.random.default_rng(0)]
+        )
+    out = estimate_candidates_chunk(
+        sils, edges, cam, SHAPE, init, settings=SMALL,
+        rng=[np.random.default_rng(0), np.random.default_rng(1)],
+    )  # fmt: skip
+    assert len(out) == 2
