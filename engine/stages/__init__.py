@@ -6,15 +6,23 @@ approximate temporal correspondence out.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+
+import numpy as np
 
 from engine.body.shapes import BodyShape
 from engine.errors import InvalidInput
 from engine.render.camera import Camera
 from engine.stages.alignment import AlignmentResult, AlignmentSettings, align, dp_path
-from engine.stages.calibration import CalibrationSettings, calibrate, fit_body_shape
+from engine.stages.calibration import (
+    CalibrationSettings,
+    calibrate,
+    fit_body_shape,
+    mirror_azimuth,
+)
 from engine.stages.foreground import ForegroundResult, ForegroundSettings, extract_foreground
 
 __all__ = [
@@ -44,6 +52,9 @@ class Stages02:
         Approximate temporal correspondence and global rotations (stage 2).
     timing_s : dict
         Seconds per stage ("foreground", "calibration", "alignment").
+    view_costs : dict
+        Stage 2's mean cost E_C per view azimuth tried (degrees -> E_C): the calibrated one
+        and, with ``CalibrationSettings.check_mirror``, the best one facing the other way.
     """
 
     foreground: ForegroundResult
@@ -52,6 +63,7 @@ class Stages02:
     width_factors: dict
     alignment: AlignmentResult
     timing_s: dict
+    view_costs: dict = field(default_factory=dict)
 
 
 def run_stages_0_2(
@@ -84,6 +96,10 @@ def run_stages_0_2_full(
     on_progress: Callable[[str, float], None] | None = None,
 ) -> Stages02:
     """Stages 0-2 of the thesis (4.1, 4.2, 4.5) on a loaded reference and video.
+
+    With ``calibration.check_mirror`` stage 2 runs for the calibrated view and for the best
+    view facing the other way, and the one with the lower mean cost E_C is kept (one frame
+    hardly tells front from back; the whole motion does).
 
     Parameters
     ----------
@@ -127,16 +143,36 @@ def run_stages_0_2_full(
     timing["foreground"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     k = calibration.video_frame
-    camera, _ = calibrate(joints[c0], reference.shape, fg.silhouettes[k], fg.edges[k],
-                          calibration, on_progress=on_progress)  # fmt: skip
-    shape = reference.shape
-    factors: dict[str, float] = {}
-    if calibration.fit_width:
-        shape, factors = fit_body_shape(joints[c0], reference.shape, camera, fg.silhouettes[k])
+    camera, report = calibrate(joints[c0], reference.shape, fg.silhouettes[k], fg.edges[k],
+                               calibration, on_progress=on_progress)  # fmt: skip
+    cameras = [camera]
+    alt = mirror_azimuth(report["azimuth_scores"], float(np.degrees(camera.azimuth)))
+    if calibration.check_mirror and alt is not None:
+        mirrored = dataclasses.replace(calibration, azimuths_deg=(alt,))
+        cameras.append(calibrate(joints[c0], reference.shape, fg.silhouettes[k], fg.edges[k],
+                                 mirrored)[0])  # fmt: skip
     timing["calibration"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    result = align(joints, shape if align_with_fitted_shape else reference.shape, camera,
-                   fg.silhouettes, fg.skin, alignment, start=c0,
-                   on_progress=on_progress)  # fmt: skip
+    results = []
+    for i, cam in enumerate(cameras):
+        shape: BodyShape = reference.shape
+        factors: dict[str, float] = {}
+        if calibration.fit_width:
+            shape, factors = fit_body_shape(joints[c0], reference.shape, cam, fg.silhouettes[k])
+        progress = None if on_progress is None else _share(on_progress, i, len(cameras))
+        aligned = align(joints, shape if align_with_fitted_shape else reference.shape, cam,
+                        fg.silhouettes, fg.skin, alignment, start=c0,
+                        on_progress=progress)  # fmt: skip
+        results.append((aligned.E_C, i, cam, shape, factors, aligned))
+    # the camera whose view explains the whole video best (CalibrationSettings.check_mirror)
+    _, _, camera, shape, factors, result = min(results, key=lambda r: (r[0], r[1]))
     timing["alignment"] = time.perf_counter() - t0
-    return Stages02(fg, camera, shape, factors, result, timing)
+    views = {round(float(np.degrees(r[2].azimuth)), 6): float(r[0]) for r in results}
+    return Stages02(fg, camera, shape, factors, result, timing, views)
+
+
+def _share(
+    on_progress: Callable[[str, float], None], i: int, n: int
+) -> Callable[[str, float], None]:
+    """Progress of the i-th of n runs of a stage as a share of the stage's whole progress."""
+    return lambda stage, f: on_progress(stage, (i + f) / n)
