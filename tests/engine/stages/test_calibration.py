@@ -42,9 +42,9 @@ def test_public_case_p1_camera():
     +6.4 px (seed 0, the engine's: -2.1 %, cy -2.0 px; without ``above_ankles`` -3.1 %, cy
     -4.5 px). Since stage 0 trusts the difference where the background was seen (and
     searches the angle too): -0.7 %, cy +1.3 px; without ``above_ankles`` -3.1 %, cy -3.7 px
-    (the shoes still print into the background). The whole video is read: the background model needs the performer to move,
-    and in the first 40 frames the head hardly does (it prints into the background and the
-    frame-0 region loses it: -3.4 % with 40 frames).
+    (the shoes still print into the background). The whole video is read: the background
+    model needs the performer to move, and in the first 40 frames the head hardly does (it
+    prints into the background and the frame-0 region loses it: -3.4 % with 40 frames).
     """
     from engine.io.bvh import load_reference
     from engine.io.video import read_video
