@@ -19,21 +19,13 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
+from half_rate import SCORE_KEYS as KEYS  # benchmarks/ is on sys.path when run as a script
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 SHARED = REPO.parent / "shared"
 # (reference, seed): the synthetic cases of the note of 2026-11-25
 SYNTHETIC = (("64_17", 1), ("64_24", 2), ("64_29", 3), ("64_30", 4))
-KEYS = (
-    ("temporal", "temporal_err_video_frames"),
-    ("boundary", "boundary_err_mean_frames"),
-    ("selected", "selected_posture_err_deg"),
-    ("best", "best_candidate_err_deg_E3B"),
-    ("E2P", "joint_2d_err_px_E2P"),
-    ("est.err", "bone_error_estimation_err_deg"),
-    ("rank", "posture_error_rank_corr"),
-)
 
 
 def synthetic_case(name: str, seed: int, cache: Path) -> Path:
@@ -49,7 +41,7 @@ def synthetic_case(name: str, seed: int, cache: Path) -> Path:
 
 def score_case(case: Path, settings: dict) -> dict:
     """``analyze`` then ``../shared/bench/score.py``'s figures."""
-    from half_rate import load_scorer  # benchmarks/ is on sys.path when run as a script
+    from half_rate import load_scorer
 
     from engine.pipeline import analyze
 

@@ -17,7 +17,7 @@ import json
 import time
 from pathlib import Path
 
-from half_rate import load_scorer  # benchmarks/ is on sys.path when run as a script
+from half_rate import SCORE_KEYS, load_scorer  # benchmarks/ is on sys.path when run as a script
 
 from engine.pipeline import Prepared, candidates, prepare, select
 
@@ -41,15 +41,7 @@ def main(argv: list[str] | None = None) -> int:
     args.cache.mkdir(parents=True, exist_ok=True)
     scorer = load_scorer(args.cases[0])
     extra = {k: json.loads(v) for k, v in (kv.split("=", 1) for kv in args.set)}
-    keys = (
-        ("temporal", "temporal_err_video_frames"),
-        ("boundary", "boundary_err_mean_frames"),
-        ("selected", "selected_posture_err_deg"),
-        ("best", "best_candidate_err_deg_E3B"),
-        ("E2P", "joint_2d_err_px_E2P"),
-        ("est.err", "bone_error_estimation_err_deg"),
-        ("rank", "posture_error_rank_corr"),
-    )
+    keys = SCORE_KEYS
     head = "".join(f"{k:>10s}" for k, _ in keys)
     print(f"{'case':24s} {'estimator':10s}{head}  s3 s/frame")
     for case in args.cases:

@@ -22,6 +22,18 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 
+# the scorer's figures the engine benchmarks print, as (column, score.py key)
+SCORE_KEYS = (
+    ("temporal", "temporal_err_video_frames"),
+    ("boundary", "boundary_err_mean_frames"),
+    ("selected", "selected_posture_err_deg"),
+    ("best", "best_candidate_err_deg_E3B"),
+    ("E2P", "joint_2d_err_px_E2P"),
+    ("est.err", "bone_error_estimation_err_deg"),
+    ("rank", "posture_error_rank_corr"),
+)
+
+
 def load_scorer(case: Path):
     path = case.parents[1] / "score.py"
     spec = importlib.util.spec_from_file_location("bench_score", path)

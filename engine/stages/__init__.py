@@ -146,8 +146,10 @@ def run_stages_0_2_full(
     camera, report = calibrate(joints[c0], reference.shape, fg.silhouettes[k], fg.edges[k],
                                calibration, on_progress=on_progress)  # fmt: skip
     cameras = [camera]
-    alt = mirror_azimuth(report["azimuth_scores"], float(np.degrees(camera.azimuth)))
-    if calibration.check_mirror and alt is not None:
+    alt = None
+    if calibration.check_mirror:
+        alt = mirror_azimuth(report["azimuth_scores"], float(np.degrees(camera.azimuth)))
+    if alt is not None:
         mirrored = dataclasses.replace(calibration, azimuths_deg=(alt,))
         cameras.append(calibrate(joints[c0], reference.shape, fg.silhouettes[k], fg.edges[k],
                                  mirrored)[0])  # fmt: skip
