@@ -284,7 +284,7 @@ def candidates(
     default ``candidates.n_prev`` 0 a frame's candidates are the same whichever chunk computes
     it, on any worker, in any order.
     """
-    from engine.stages.candidates import estimate_candidates_chunk
+    from engine.stages.candidates import estimate_candidates_chunk, frame_rngs
 
     s = _settings(settings)
     frames = range(prepared.n_frames) if frames is None else frames
@@ -295,7 +295,7 @@ def candidates(
     out = estimate_candidates_chunk(
         prepared.silhouettes[idx], prepared.edges[idx], prepared.camera, prepared.shape,
         prepared.initial_postures(frames), settings=s.candidates,
-        rng=[np.random.default_rng([s.seed, int(t)]) for t in idx], on_progress=on_progress,
+        rng=frame_rngs(s.seed, frames), on_progress=on_progress,
     )  # fmt: skip
     return CandidateChunk(
         frames=idx, candidates=[f.candidates for f in out], d_s=[f.d_s for f in out],

@@ -124,7 +124,7 @@ def run(args: argparse.Namespace) -> int:
     from engine.io.bvh import sample_reference
     from engine.measures import bone_angles
     from engine.settings import Settings
-    from engine.stages.candidates import estimate_candidates_chunk
+    from engine.stages.candidates import estimate_candidates_chunk, frame_rngs
 
     for name in ("reference", "video"):
         if not Path(getattr(args, name)).exists():
@@ -136,7 +136,7 @@ def run(args: argparse.Namespace) -> int:
     t1 = time.perf_counter()
     fcs = estimate_candidates_chunk(
         x.silhouettes, x.edges, x.camera, x.shape, x.initial, settings=settings.candidates,
-        rng=np.random.default_rng(args.seed),
+        rng=frame_rngs(args.seed, frames),
     )  # fmt: skip
     t_c = time.perf_counter() - t1
     out_frames = []

@@ -820,6 +820,15 @@ def _in_plane_candidates(
     return FrameCandidates(cands, d_s, tuple(flags), np.asarray([float(d0[0])]), prior)
 
 
+def frame_rngs(seed: int, frames: Sequence[int]) -> list[np.random.Generator]:
+    """One random stream per video frame, from the seed and the frame's number.
+
+    What every caller of :func:`estimate_candidates_chunk` passes, so a frame gets the same
+    candidates from ``coach analyze``, ``coach candidates`` and any worker's chunk.
+    """
+    return [np.random.default_rng([int(seed), int(t)]) for t in frames]
+
+
 def estimate_candidates_chunk(
     target_silhouettes: np.ndarray,
     target_edges: np.ndarray,
