@@ -23,7 +23,12 @@ from engine.stages.calibration import (
     fit_body_shape,
     mirror_azimuth,
 )
-from engine.stages.foreground import ForegroundResult, ForegroundSettings, extract_foreground
+from engine.stages.foreground import (
+    ForegroundResult,
+    ForegroundSettings,
+    contour,
+    extract_foreground,
+)
 
 __all__ = [
     "AlignmentResult", "AlignmentSettings", "CalibrationSettings", "ForegroundResult",
@@ -143,7 +148,10 @@ def run_stages_0_2_full(
     timing["foreground"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     k = calibration.video_frame
-    camera, report = calibrate(joints[c0], reference.shape, fg.silhouettes[k], fg.edges[k],
+    # the outline only: interior image edges (ForegroundSettings.interior_edges) are for
+    # stage 3's per-part fit; the calibration's capsule body has no clothing seams
+    outline = contour(fg.silhouettes[k]) | contour(fg.skin[k])
+    camera, report = calibrate(joints[c0], reference.shape, fg.silhouettes[k], outline,
                                calibration, on_progress=on_progress)  # fmt: skip
     cameras = [camera]
     alt = None
@@ -151,7 +159,7 @@ def run_stages_0_2_full(
         alt = mirror_azimuth(report["azimuth_scores"], float(np.degrees(camera.azimuth)))
     if alt is not None:
         mirrored = dataclasses.replace(calibration, azimuths_deg=(alt,))
-        cameras.append(calibrate(joints[c0], reference.shape, fg.silhouettes[k], fg.edges[k],
+        cameras.append(calibrate(joints[c0], reference.shape, fg.silhouettes[k], outline,
                                  mirrored)[0])  # fmt: skip
     timing["calibration"] = time.perf_counter() - t0
     t0 = time.perf_counter()

@@ -11,7 +11,7 @@ import pytest
 from engine.errors import InvalidInput
 from engine.render import capsules
 from engine.render.camera import Camera
-from engine.stages.foreground import extract_foreground
+from engine.stages.foreground import ForegroundSettings, extract_foreground
 from tests.conftest import BENCH_CASES, CMU
 
 P1 = BENCH_CASES / "P1_warp_64_29"
@@ -28,6 +28,25 @@ def test_synthetic_blob_on_static_background(rng):
     iou = (fg.silhouettes[5] & truth).sum() / (fg.silhouettes[5] | truth).sum()
     assert iou > 0.8
     assert "no_person" not in fg.flags[5]
+
+
+def test_interior_edges_add_the_outline_of_an_arm_over_the_torso(rng):
+    # a blue "torso" crossed by a lighter "arm": the body region is the torso; only the
+    # option adds the arm's outline inside it, and the region itself does not change
+    bg = rng.integers(0, 255, (60, 80, 3), dtype=np.uint8)
+    frames = np.repeat(bg[None], 12, 0)
+    for i in range(12):
+        frames[i, 10:50, 10 + 4 * i : 30 + 4 * i] = (20, 60, 200)
+        frames[i, 26:32, 10 + 4 * i : 30 + 4 * i] = (120, 200, 120)  # not skin-coloured
+    plain = extract_foreground(frames)
+    rich = extract_foreground(frames, ForegroundSettings(interior_edges=True))
+    assert (plain.silhouettes == rich.silhouettes).all()
+    assert (rich.edges >= plain.edges).all()
+    added = rich.edges[5] & ~plain.edges[5]
+    rows = np.flatnonzero(added.any(1))
+    assert added.sum() >= 20
+    assert rows.min() >= 24 and rows.max() <= 33  # along the arm's top and bottom edges
+    assert not (added & ~plain.silhouettes[5]).any()
 
 
 def test_hole_showing_background_stays_open():
