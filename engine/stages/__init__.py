@@ -22,6 +22,7 @@ from engine.stages.calibration import (
     calibrate,
     fit_body_shape,
     mirror_azimuth,
+    refine_on_frames,
 )
 from engine.stages.foreground import (
     ForegroundResult,
@@ -46,7 +47,8 @@ class Stages02:
     foreground : ForegroundResult
         Body regions per video frame (stage 0).
     camera : Camera
-        Calibrated scaled orthographic camera (stage 1).
+        Calibrated scaled orthographic camera (stage 1; polished after stage 2 on frames
+        spread over the video with ``CalibrationSettings.refine_frames``).
     shape : BodyShape
         The performer's body: the reference's bones with capsule radii fitted to the
         calibration frame (:func:`fit_body_shape`); the reference's own shape when the
@@ -177,8 +179,45 @@ def run_stages_0_2_full(
     # the camera whose view explains the whole video best (CalibrationSettings.check_mirror)
     _, _, camera, shape, factors, result = min(results, key=lambda r: (r[0], r[1]))
     timing["alignment"] = time.perf_counter() - t0
+    if calibration.refine_frames > 0:
+        t0 = time.perf_counter()
+        camera, shape, factors = _refine_camera(
+            camera, reference, fg, result, calibration, k, c0
+        )
+        timing["calibration"] += time.perf_counter() - t0
     views = {round(float(np.degrees(r[2].azimuth)), 6): float(r[0]) for r in results}
     return Stages02(fg, camera, shape, factors, result, timing, views)
+
+
+def _refine_camera(
+    camera: Camera,
+    reference,
+    fg: ForegroundResult,
+    aligned: AlignmentResult,
+    calibration: CalibrationSettings,
+    k: int,
+    c0: int,
+) -> tuple[Camera, BodyShape, dict[str, float]]:
+    """The camera polished on frames spread over the video, and the body widths refitted.
+
+    Each frame shows the reference at stage 2's C(t') turned by T_t' about the hip
+    (``CalibrationSettings.refine_frames``).
+    """
+    joints = reference.motion.joints
+    n = len(aligned.C)
+    idx = np.unique(np.linspace(0, n - 1, min(calibration.refine_frames, n)).round().astype(int))
+    ref = joints[aligned.C[idx]]
+    hip = ref[:, :1]
+    posed = np.einsum("nij,nkj->nki", aligned.rotations[idx], ref - hip) + hip
+    outlines = np.array([contour(fg.silhouettes[i]) | contour(fg.skin[i]) for i in idx])
+    camera, _ = refine_on_frames(
+        camera, posed, reference.shape, fg.silhouettes[idx], outlines, calibration
+    )
+    shape: BodyShape = reference.shape
+    factors: dict[str, float] = {}
+    if calibration.fit_width:
+        shape, factors = fit_body_shape(joints[c0], reference.shape, camera, fg.silhouettes[k])
+    return camera, shape, factors
 
 
 def _share(
