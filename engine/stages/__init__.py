@@ -27,8 +27,8 @@ from engine.stages.calibration import (
 from engine.stages.foreground import (
     ForegroundResult,
     ForegroundSettings,
-    contour,
     extract_foreground,
+    outline,
 )
 
 __all__ = [
@@ -152,8 +152,8 @@ def run_stages_0_2_full(
     k = calibration.video_frame
     # the outline only: interior image edges (ForegroundSettings.interior_edges) are for
     # stage 3's per-part fit; the calibration's capsule body has no clothing seams
-    outline = contour(fg.silhouettes[k]) | contour(fg.skin[k])
-    camera, report = calibrate(joints[c0], reference.shape, fg.silhouettes[k], outline,
+    edges_k = outline(fg.silhouettes[k], fg.skin[k])
+    camera, report = calibrate(joints[c0], reference.shape, fg.silhouettes[k], edges_k,
                                calibration, on_progress=on_progress)  # fmt: skip
     cameras = [camera]
     alt = None
@@ -161,7 +161,7 @@ def run_stages_0_2_full(
         alt = mirror_azimuth(report["azimuth_scores"], float(np.degrees(camera.azimuth)))
     if alt is not None:
         mirrored = dataclasses.replace(calibration, azimuths_deg=(alt,))
-        cameras.append(calibrate(joints[c0], reference.shape, fg.silhouettes[k], outline,
+        cameras.append(calibrate(joints[c0], reference.shape, fg.silhouettes[k], edges_k,
                                  mirrored)[0])  # fmt: skip
     timing["calibration"] = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -209,7 +209,7 @@ def _refine_camera(
     ref = joints[aligned.C[idx]]
     hip = ref[:, :1]
     posed = np.einsum("nij,nkj->nki", aligned.rotations[idx], ref - hip) + hip
-    outlines = np.array([contour(fg.silhouettes[i]) | contour(fg.skin[i]) for i in idx])
+    outlines = np.array([outline(fg.silhouettes[i], fg.skin[i]) for i in idx])
     camera, _ = refine_on_frames(
         camera, posed, reference.shape, fg.silhouettes[idx], outlines, calibration
     )

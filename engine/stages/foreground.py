@@ -546,6 +546,12 @@ def contour(mask: np.ndarray) -> np.ndarray:
     return (m - cv2.erode(m, np.ones((3, 3), np.uint8), borderType=cv2.BORDER_CONSTANT)) > 0
 
 
+def outline(mask: np.ndarray, skin: np.ndarray) -> np.ndarray:
+    """Edges of a body region: its contour and its skin regions' (the arms over the torso),
+    (H, W) bool each -> (H, W) bool (thesis 4.1.2)."""
+    return contour(mask) | contour(skin)
+
+
 def interior_edges(
     frame: np.ndarray, mask: np.ndarray, thresholds: tuple[float, float]
 ) -> np.ndarray:
@@ -614,7 +620,7 @@ def extract_foreground(
             mask = mask | skin[i]
         timing["skin"] += time.perf_counter() - t0
         sil[i] = mask
-        edges[i] = contour(mask) | contour(skin[i])
+        edges[i] = outline(mask, skin[i])
         if s.interior_edges:
             edges[i] |= interior_edges(f[i], mask, s.canny_thresholds)
         flags.append(_flags(mask, raw, blobs, never, s, grow))

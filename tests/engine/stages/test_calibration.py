@@ -83,6 +83,14 @@ def test_validation():
         calibrate(np.zeros((17, 3)), shape, z, z)
     with pytest.raises(InvalidInput, match="at least 3|body region"):
         principal_axes(z)
+    from engine.stages.calibration import refine_on_frames
+
+    cam = Camera(scale=10.0, width=20, height=20)
+    masks = np.zeros((2, 20, 20), bool)
+    with pytest.raises(InvalidInput, match="must agree"):
+        refine_on_frames(cam, np.zeros((3, 17, 3)), shape, masks, masks)
+    with pytest.raises(InvalidInput, match="must agree"):
+        refine_on_frames(cam, np.zeros((2, 16, 3)), shape, masks, masks)
 
 
 def test_fit_body_shape_recovers_wider_limbs():
