@@ -168,23 +168,23 @@ def run_stages_0_2_full(
     results = []
     for i, cam in enumerate(cameras):
         shape: BodyShape = reference.shape
-        factors: dict[str, float] = {}
-        if calibration.fit_width:
-            shape, factors = fit_body_shape(joints[c0], reference.shape, cam, fg.silhouettes[k])
+        if align_with_fitted_shape and calibration.fit_width:
+            shape, _ = fit_body_shape(joints[c0], reference.shape, cam, fg.silhouettes[k])
         progress = None if on_progress is None else _share(on_progress, i, len(cameras))
-        aligned = align(joints, shape if align_with_fitted_shape else reference.shape, cam,
-                        fg.silhouettes, fg.skin, alignment, start=c0,
+        aligned = align(joints, shape, cam, fg.silhouettes, fg.skin, alignment, start=c0,
                         on_progress=progress)  # fmt: skip
-        results.append((aligned.E_C, i, cam, shape, factors, aligned))
+        results.append((aligned.E_C, i, cam, aligned))
     # the camera whose view explains the whole video best (CalibrationSettings.check_mirror)
-    _, _, camera, shape, factors, result = min(results, key=lambda r: (r[0], r[1]))
+    _, _, camera, result = min(results, key=lambda r: (r[0], r[1]))
     timing["alignment"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
     if calibration.refine_frames > 0:
-        t0 = time.perf_counter()
-        camera, shape, factors = _refine_camera(
-            camera, reference, fg, result, calibration, k, c0
-        )
-        timing["calibration"] += time.perf_counter() - t0
+        camera = _refine_camera(camera, reference, fg, result, calibration)
+    factors: dict[str, float] = {}
+    shape = reference.shape
+    if calibration.fit_width:  # the performer's widths, for the final camera
+        shape, factors = fit_body_shape(joints[c0], reference.shape, camera, fg.silhouettes[k])
+    timing["calibration"] += time.perf_counter() - t0
     views = {round(float(np.degrees(r[2].azimuth)), 6): float(r[0]) for r in results}
     return Stages02(fg, camera, shape, factors, result, timing, views)
 
@@ -195,29 +195,22 @@ def _refine_camera(
     fg: ForegroundResult,
     aligned: AlignmentResult,
     calibration: CalibrationSettings,
-    k: int,
-    c0: int,
-) -> tuple[Camera, BodyShape, dict[str, float]]:
-    """The camera polished on frames spread over the video, and the body widths refitted.
+) -> Camera:
+    """The camera polished on frames spread over the video.
 
     Each frame shows the reference at stage 2's C(t') turned by T_t' about the hip
     (``CalibrationSettings.refine_frames``).
     """
-    joints = reference.motion.joints
     n = len(aligned.C)
     idx = np.unique(np.linspace(0, n - 1, min(calibration.refine_frames, n)).round().astype(int))
-    ref = joints[aligned.C[idx]]
+    ref = reference.motion.joints[aligned.C[idx]]
     hip = ref[:, :1]
     posed = np.einsum("nij,nkj->nki", aligned.rotations[idx], ref - hip) + hip
     outlines = np.array([outline(fg.silhouettes[i], fg.skin[i]) for i in idx])
     camera, _ = refine_on_frames(
         camera, posed, reference.shape, fg.silhouettes[idx], outlines, calibration
     )
-    shape: BodyShape = reference.shape
-    factors: dict[str, float] = {}
-    if calibration.fit_width:
-        shape, factors = fit_body_shape(joints[c0], reference.shape, camera, fg.silhouettes[k])
-    return camera, shape, factors
+    return camera
 
 
 def _share(
