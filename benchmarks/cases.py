@@ -7,7 +7,7 @@ analyses every case with ``engine.pipeline.analyze`` (optionally with setting ov
 prints the scorer's figures per case and their mean. Two cases run at a time.
 
     python benchmarks/cases.py [--set '{"foreground": {"min_free_fraction": 0.3}}'] \
-        [--cache /tmp/coach-cases] [--jobs 2]
+        [--cache /tmp/coach-cases] [--jobs 2] [--only syn_64_24]
 """
 
 from __future__ import annotations
@@ -56,11 +56,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--set", default="{}", help="settings overrides (JSON)")
     ap.add_argument("--cache", type=Path, default=Path("/tmp/coach-cases"))
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--only", default="", help="only the cases whose name contains this")
     args = ap.parse_args(argv)
     settings = json.loads(args.set)
     args.cache.mkdir(parents=True, exist_ok=True)
     cases = sorted((SHARED / "bench" / "cases").iterdir())
     cases += [synthetic_case(name, seed, args.cache) for name, seed in SYNTHETIC]
+    cases = [c for c in cases if args.only in c.name]
     with ProcessPoolExecutor(args.jobs) as pool:
         scores = list(pool.map(score_case, cases, [settings] * len(cases)))
     print(f"{'case':24s}" + "".join(f"{k:>10s}" for k, _ in KEYS))

@@ -211,3 +211,67 @@ def test_chunk_needs_one_generator_or_one_per_frame() -> None:
         rng=[np.random.default_rng(0), np.random.default_rng(1)],
     )  # fmt: skip
     assert len(out) == 2
+
+
+def _arm_posture(l_upper: np.ndarray, l_lower: np.ndarray) -> np.ndarray:
+    """The default body, right arm a little down, left arm bones along the given directions."""
+    from engine.stages.candidates import _turn_to
+
+    def towards(d: list[float]) -> np.ndarray:
+        d = np.asarray(d, float)
+        return _turn_to(np.array([1.0, 0.0, 0.0]), (d / np.linalg.norm(d))[None])[0]
+
+    R = np.broadcast_to(np.eye(3), (12, 3, 3)).copy()
+    R[PART_INDEX["r_upper_arm"]] = R[PART_INDEX["r_lower_arm"]] = rotation_about_axis(
+        np.array([0, 0, 1.0]), 0.3
+    )
+    R[PART_INDEX["l_upper_arm"]] = towards(l_upper)
+    R[PART_INDEX["l_lower_arm"]] = towards(l_lower)
+    return forward_kinematics(SHAPE.offsets, np.array([0.0, 1.0, 0.0]), R)
+
+
+def test_escape_brings_back_an_arm_started_on_the_other_side() -> None:
+    # the left arm is raised; the start has it hanging down, 120 deg away: BP and the
+    # pattern search are local and stay near the start, the escape's jumps do not
+    truth = _arm_posture([1.0, 1.2, 0.2], [1.0, 1.6, -0.3])
+    init = _arm_posture([1.0, -1.7, 0.2], [1.0, -1.7, 0.2])
+    cam = _camera(truth)
+    r = render(truth, SHAPE, cam)
+    err = {}
+    for dirs in (0, 48):
+        s = replace(SMALL, escape_dirs=dirs, refine_alone=dirs > 0, lambda_e=1.0, prior_weight=0.0)
+        fc = estimate_candidates(
+            r.silhouette, r.edges, cam, SHAPE, init, settings=s, rng=np.random.default_rng(0)
+        )
+        best = fc.candidates[int(np.argmin(fc.d_s))]
+        err[dirs] = np.linalg.norm(cam.project(best) - cam.project(truth), axis=-1).max()
+        assert limits_ok(fc.candidates).all()
+    assert err[0] > 10.0, err  # without the escape the wrist stays far off
+    assert err[48] < 3.0, err  # every joint within 3 px on a 100 px body
+
+
+def test_occluded_part_takes_the_reference_pose_where_the_image_allows() -> None:
+    from engine.render.capsules import Target
+    from engine.stages.candidates import _frame_offsets, _reset_occluded, _Scorer
+
+    # left forearm across the back, hidden by the chest
+    truth = _arm_posture([-0.5, -1.0, -0.6], [-1.0, 0.0, -2.0])
+    cam = _camera(truth)
+    r = render(truth, SHAPE, cam)
+    s = CandidateSettings.exact_body()
+    assert s.occluded_tolerance < 0.05
+    scorer = _Scorer(Target.from_masks(r.silhouette, r.edges), SHAPE, cam, truth, s)
+    offsets = _frame_offsets(truth, SHAPE.offsets)
+    hidden_too = _arm_posture([-0.5, -1.0, -0.6], [-1.0, 0.3, -2.0])
+    sticks_out = _arm_posture([-0.5, -1.0, -0.6], [1.0, 0.2, 0.3])
+    flags: list[str] = []
+    reset = _reset_occluded(scorer, truth, hidden_too, offsets, s, flags)
+    assert flags == ["occluded:l_wrist"]
+    np.testing.assert_allclose(reset[11] - reset[10], hidden_too[11] - hidden_too[10], atol=1e-9)
+    flags = []
+    kept = _reset_occluded(scorer, truth, sticks_out, offsets, s, flags)
+    assert flags == ["occluded:l_wrist"]  # still flagged: the image does not show it
+    np.testing.assert_allclose(kept, truth)  # but the image rules out the reference's pose
+    # the defaults (for clothed bodies, whose d_S is no judge of a hidden part) always reset
+    forced = _reset_occluded(scorer, truth, sticks_out, offsets, CandidateSettings(), [])
+    np.testing.assert_allclose(forced[11] - forced[10], sticks_out[11] - sticks_out[10], atol=1e-9)
