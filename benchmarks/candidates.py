@@ -110,7 +110,9 @@ def synthetic(args: argparse.Namespace, settings: CandidateSettings) -> None:
         rows["selected deg"].append(np.degrees(d_B(fc.best, truth)))
         rows["init deg"].append(np.degrees(d_B(init, truth)))
     _summary(rows)
-    print(f"frames {len(frames)}")
+    # the mean is pulled up by a few frames stuck in a wrong basin; say how many
+    stuck = int((np.asarray(rows["E_2P px"]) > 1.5).sum())
+    print(f"frames {len(frames)}, of which {stuck} with E_2P > 1.5 px")
 
 
 def _foreground(case: Path, cache: Path | None) -> dict[str, np.ndarray]:
