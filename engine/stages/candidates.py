@@ -517,22 +517,15 @@ def _refine(
     for _ in range(s.refine_sweeps if sweeps is None else sweeps):
         improved = False
         for p in range(N_PARTS):
-            J = cur[PART_ROOT_JOINT[p]]
-            sub = _SUBTREE_JOINTS[p]
-            own = np.array([BONE_CHILD[b] for b in PART_BONES[p]])
-            d = (cur[own] - J).mean(0)
+            d = _part_dir(cur, p)
             a1 = np.cross(n, d)
             axes = [n, a1] if np.linalg.norm(a1) > 1e-9 and not in_plane else [n]
             if len(PART_BONES[p]) > 1 and not in_plane:
                 axes.append(np.cross(n, a1) if np.linalg.norm(a1) > 1e-9 else d)
-            Rs = [rotation_about_axis(ax, sg * step) for ax in axes for sg in (-1.0, 1.0)]
-            samples = []
-            for R in Rs:
-                q = cur.copy()
-                q[sub] = J + (cur[sub] - J) @ R.T
-                samples.append(q)
+            Rs = np.stack([rotation_about_axis(ax, sg * step) for ax in axes for sg in (-1.0, 1.0)])
+            samples = list(_turned(cur, p, Rs))
             if s.refine_alone and len(_SUBTREES[p]) > 1:
-                samples.extend(_turned_alone(cur, p, np.stack(Rs)))
+                samples.extend(_turned_alone(cur, p, Rs))
             if p == 0 and move_root:
                 for vec in camera.R_cam_world[:2]:
                     for sg in (-1.0, 1.0):
@@ -565,8 +558,8 @@ def _turn_to(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     c = b @ a
     ang = np.arctan2(s, c)
     perp = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
-    axis = np.where(s[:, None] > 1e-9, axis / np.maximum(s, 1e-12)[:, None], perp)
-    return np.stack([rotation_about_axis(ax, t) for ax, t in zip(axis, ang, strict=True)])
+    axis = np.where(s[:, None] > 1e-9, axis, perp)
+    return rotation_about_axis(axis, ang)
 
 
 def _turned(cur: np.ndarray, p: int, Rs: np.ndarray) -> np.ndarray:
@@ -626,7 +619,7 @@ def _moves(cur: np.ndarray, p: int, dirs: np.ndarray, twists: np.ndarray) -> np.
     straightened (moving a bent limb out of the torso can cost as much as it gains).
     """
     d = _part_dir(cur, p)
-    R_twist = np.stack([rotation_about_axis(d, a) for a in twists])
+    R_twist = rotation_about_axis(d, twists)
     out = [_turned(cur, p, R_twist), _turned_alone(cur, p, R_twist)]
     if p > 0:
         R_dir = _turn_to(d, dirs)
