@@ -90,7 +90,7 @@ class CandidateSettings:
     exactly; :meth:`exact_body` is the cheaper setting for that case.
     ``NUMBA_NUM_THREADS=1 benchmarks/candidates.py --frames 100`` (E_3B mean deg / E_2P px /
     E_2M px / s per frame): thesis 6.31 / 1.44 / 8.5 / 5.1, :meth:`exact_body` 6.00 / 1.18 /
-    5.1 / 1.7, these defaults 8.14 / 3.00 / 10.9 / 0.6. The defaults keep their priors
+    5.1 / 1.6, these defaults 8.14 / 3.00 / 10.9 / 0.6. The defaults keep their priors
     towards the reference because on the public videos the body-model mismatch, not the
     search, limits stage 3: :meth:`exact_body` on P1 with the true C(t') and camera
     (``--case``, frames 20-80) selects postures 22 deg from the truth against 1.7 for the
