@@ -610,16 +610,16 @@ def _swapped(cur: np.ndarray, a: int, b: int) -> np.ndarray:
     return _from_bones(cur[0], vec)
 
 
-def _moves(cur: np.ndarray, p: int, dirs: np.ndarray, twists: np.ndarray) -> np.ndarray:
+def _moves(cur: np.ndarray, p: int, dirs: np.ndarray) -> np.ndarray:
     """The jumps :func:`_escape` tries for part p of ``cur`` (17, 3), shape (n, 17, 3).
 
     The part's subtree, or the part alone (the parts below keep their directions), twisted
-    about the part's direction by each of ``twists`` (rad) and turned to point along each of
+    about the part's direction by each of ``_TWISTS`` and turned to point along each of
     ``dirs`` (unit, (m, 3); not for the root part); an upper limb also with its lower limb
     straightened (moving a bent limb out of the torso can cost as much as it gains).
     """
     d = _part_dir(cur, p)
-    R_twist = rotation_about_axis(d, twists)
+    R_twist = rotation_about_axis(d, _TWISTS)
     out = [_turned(cur, p, R_twist), _turned_alone(cur, p, R_twist)]
     if p > 0:
         R_dir = _turn_to(d, dirs)
@@ -632,6 +632,9 @@ def _moves(cur: np.ndarray, p: int, dirs: np.ndarray, twists: np.ndarray) -> np.
     return batch[limits_ok(batch)]
 
 
+#: Twists :func:`_moves` tries about a part's own direction: multiples of 30 deg, (11,) rad.
+_TWISTS = 2.0 * np.pi * np.arange(1, 12) / 12
+
 #: Parts whose subtree holds other parts' limbs: a wrong turn of them takes the limbs along.
 _TORSO_PARTS = (0, 1, 2)
 
@@ -640,7 +643,6 @@ def _escape(
     scorer: _Scorer,
     joints: np.ndarray,
     n_dirs: int,
-    n_twists: int = 12,
     parts: Sequence[int] = ALL_PARTS,
 ) -> tuple[np.ndarray, float]:
     """Let parts stuck in a wrong basin jump (:func:`_moves`); keep each jump that lowers d_S.
@@ -653,11 +655,10 @@ def _escape(
     cur = joints.copy()
     best = float(scorer.full(cur[None])[0])
     dirs = _sphere(n_dirs)
-    twists = 2.0 * np.pi * np.arange(1, n_twists) / n_twists
 
     def keep(batch: np.ndarray) -> None:
+        """Take the best of ``batch`` (n, 17, 3; within the joint limits) if it lowers d_S."""
         nonlocal cur, best
-        batch = batch[limits_ok(batch)]
         if not len(batch):
             return
         sc = scorer.full(batch)
@@ -666,8 +667,9 @@ def _escape(
             cur, best = batch[k], float(sc[k])
 
     for p in parts:
-        keep(_moves(cur, p, dirs, twists))
-    keep(np.stack([_swapped(cur, a, b) for a, b in _LIMB_PAIRS]))
+        keep(_moves(cur, p, dirs))
+    swaps = np.stack([_swapped(cur, a, b) for a, b in _LIMB_PAIRS])
+    keep(swaps[limits_ok(swaps)])
     return cur, best
 
 
@@ -702,11 +704,10 @@ def _escape_from(
         polish(q)
     if best > s.escape_lookahead_ds and s.escape_lookahead > 0:
         dirs = _sphere(s.escape_dirs)
-        twists = 2.0 * np.pi * np.arange(1, 12) / 12
         limbs = [p for p in ALL_PARTS if p not in _TORSO_PARTS]
         base = out
         for p in _TORSO_PARTS:
-            batch = _moves(base, p, dirs, twists)
+            batch = _moves(base, p, dirs)
             for k in np.argsort(scorer.full(batch))[: s.escape_lookahead]:
                 polish(batch[k], limbs)
     return out
