@@ -304,6 +304,13 @@ class CandidateSettings:
             )
         if self.n_candidates < 1:
             raise InvalidInput(f"settings.n_candidates must be >= 1, got {self.n_candidates}")
+        for name in ("escape_dirs", "escape_lookahead"):
+            if getattr(self, name) < 0:
+                raise InvalidInput(f"settings.{name} must be >= 0, got {getattr(self, name)}")
+        if not self.occluded_tolerance >= 0.0:  # also refuses NaN
+            raise InvalidInput(
+                f"settings.occluded_tolerance must be >= 0, got {self.occluded_tolerance}"
+            )
 
 
 @dataclass(frozen=True)

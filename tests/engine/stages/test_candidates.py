@@ -176,6 +176,17 @@ def test_estimator_must_be_known():
         CandidateSettings(estimator="nope").validate()
 
 
+@pytest.mark.parametrize(
+    "bad",
+    [{"escape_dirs": -1}, {"escape_lookahead": -2}, {"occluded_tolerance": -0.1},
+     {"occluded_tolerance": float("nan")}],
+)  # fmt: skip
+def test_escape_and_occlusion_settings_are_checked(bad: dict) -> None:
+    with pytest.raises(InvalidInput, match=next(iter(bad))):
+        CandidateSettings(**bad).validate()
+    CandidateSettings.exact_body().validate()
+
+
 def test_in_plane_keeps_the_root_unless_allowed_to_move_it() -> None:
     truth = _posture(0.0)
     cam = _camera(truth)
