@@ -18,6 +18,7 @@ from engine.render.capsules import (
     Target,
     WidthTarget,
     d_A_batch,
+    d_A_subpixel_batch,
     d_S_batch,
     project_capsules,
     render,
@@ -210,6 +211,57 @@ def test_identity_scores_zero(rng: np.random.Generator) -> None:
     assert d_S_batch(j[None], tgt, SHAPE, CAM)[0] == pytest.approx(0.0, abs=1e-12)
 
 
+def test_subpixel_area_is_the_capsules_analytic_area(rng: np.random.Generator) -> None:
+    H, W = 60, 80
+    full = np.ones((H, W), bool)
+    prefix = np.zeros((H, W + 1), np.int32)
+    np.cumsum(full, axis=1, out=prefix[:, 1:])
+    for _ in range(20):
+        a = rng.uniform([20, 20], [60, 40])
+        b = a + rng.uniform(-15, 15, size=2)
+        r = rng.uniform(2.0, 8.0)
+        out = np.empty((1, 2))
+        _raster.sil_counts_smooth(np.stack([a, b])[None, None], np.array([r]), prefix, 16, out)
+        exact = 2 * r * np.linalg.norm(b - a) + np.pi * r * r
+        assert out[0, 0] == pytest.approx(exact, rel=5e-3)
+        assert out[0, 1] == pytest.approx(out[0, 0], rel=1e-9)  # all inside the target
+
+
+def test_subpixel_d_A_is_smooth_in_sub_pixel_shifts(rng: np.random.Generator) -> None:
+    j, tgt = _target(rng)
+    shifts = np.arange(-10, 11) * 0.1  # pixels
+    moved = j[None] + (shifts / CAM.scale)[:, None, None] * np.array([1.0, 0.0, 0.0])
+    d = d_A_subpixel_batch(moved, tgt, SHAPE, CAM)
+    # one valley, falling then rising at every 0.1 px step, at the target's own posture up to
+    # the target's pixel quantisation (its pixels are whole, the body's outline is not)
+    k = int(np.argmin(d))
+    assert abs(shifts[k]) <= 0.2
+    assert np.all(np.diff(d[k:]) > 0) and np.all(np.diff(d[: k + 1]) < 0)
+    # close to the pixel-centre d_A (the difference is the boundary pixels' partial coverage)
+    assert abs(d[10] - d_A_batch(j[None], tgt, SHAPE, CAM)[0]) < 0.05
+    off = j + np.array([5.0, 0.0, 0.0])  # off-screen: nothing overlaps
+    assert d_A_subpixel_batch(off[None], tgt, SHAPE, CAM)[0] == 1.0
+
+
+def test_subpixel_overlap_moves_where_pixel_centres_do_not() -> None:
+    # a forearm-sized capsule moved sideways by 0.1 px steps against its own pixel mask
+    H, W = 40, 60
+    ends = np.array([[[30.0, 8.0], [30.0, 30.0]]])
+    rad = np.array([3.3])
+    mask = np.zeros((1, H, W), bool)
+    _raster.fill_silhouettes(ends[None], rad, mask)
+    prefix = np.zeros((H, W + 1), np.int32)
+    np.cumsum(mask[0], axis=1, out=prefix[:, 1:])
+    moved = ends[None] + np.arange(7)[:, None, None, None] * np.array([0.1, 0.0])
+    centres = np.empty((7, 2), np.int64)
+    smooth = np.empty((7, 2))
+    _raster.sil_counts(moved, rad, prefix, centres)
+    _raster.sil_counts_smooth(moved, rad, prefix, 4, smooth)
+    assert np.any(np.diff(centres[:, 1]) == 0)  # pixel centres: flat steps
+    assert np.all(np.diff(smooth[:, 1]) < 0)  # sub-pixel: every step loses overlap
+    np.testing.assert_allclose(smooth[:, 0], smooth[0, 0], rtol=1e-9)  # same area throughout
+
+
 @pytest.mark.parametrize("part", range(N_PARTS))
 def test_incremental_equals_full(rng: np.random.Generator, part: int) -> None:
     _, tgt = _target(rng)
@@ -259,6 +311,7 @@ def test_update_part_keeps_other_caches(rng: np.random.Generator) -> None:
         (lambda t: silhouettes(_rest(), SHAPE, CAM), r"\(N, 17, 3\)"),
         (lambda t: d_S_batch(np.zeros((2, 17, 2)), t, SHAPE, CAM), r"\(N, 17, 3\)"),
         (lambda t: d_A_batch(_rest()[None], t, SHAPE, CAM.with_(width=100)), "target is"),
+        (lambda t: d_A_subpixel_batch(_rest()[None], t, SHAPE, CAM, sub=0), "sub"),
         (lambda t: project_capsules(np.zeros((17, 2)), SHAPE, CAM), "joints"),
         (lambda t: PartScorer(t, SHAPE, CAM, _rest()).score(12, _rest()[None]), "part"),
         (lambda t: PartScorer(t, SHAPE, CAM, _rest()).score(1, _rest()), "joints_samples"),
