@@ -6,7 +6,8 @@ truth with every part turned about its parent joint by a random angle in [-20, 2
 Prints E_2P, E_2M (px, eq. 5.1-5.2) and the E_3B (deg, eq. 5.3) of the selected candidate
 (``FrameCandidates.best``: lowest d_S + prior, lowest d_S when ``prior_weight`` is 0), the
 E_3B of the best candidate, and seconds per frame. ``--exact`` runs
-``CandidateSettings.exact_body()`` (the escape, no prior), ``--thesis`` the thesis' settings.
+``CandidateSettings.exact_body()`` (the escape, restarts, no prior), ``--thesis`` the
+thesis' settings.
 
 Case (``--case DIR``): a bench case's video through stage 0 (foreground), its true C(t') and
 camera; the initial posture is the reference at the true C(t'). Prints the E_3B of the initial
@@ -36,31 +37,15 @@ from pathlib import Path
 
 import numpy as np
 
-from engine.body.kinematics import rotation_about_axis
-from engine.body.skeleton import N_PARTS, PART_ROOT_JOINT
 from engine.io.bvh import load_reference, sample_reference
 from engine.measures import d_B
 from engine.render.camera import Camera
 from engine.render.capsules import render
 from engine.stages.calibration import fit_body_shape
-from engine.stages.candidates import (
-    _SUBTREE_JOINTS,
-    CandidateSettings,
-    estimate_candidates,
-)
+from engine.stages.candidates import CandidateSettings, estimate_candidates
+from engine.stages.candidates import perturb_parts as perturb
 
 CMU = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "cmu" / "64_29.bvh"
-
-
-def perturb(joints: np.ndarray, max_deg: float, rng: np.random.Generator) -> np.ndarray:
-    """Turn every part (with its subtree) about its root joint by U[-max, max] deg."""
-    out = joints.copy()
-    for p in range(N_PARTS):
-        J = out[PART_ROOT_JOINT[p]]
-        R = rotation_about_axis(rng.normal(size=3), np.radians(rng.uniform(-max_deg, max_deg)))
-        sub = _SUBTREE_JOINTS[p]
-        out[sub] = J + (out[sub] - J) @ R.T
-    return out
 
 
 def camera_for(joints: np.ndarray, height_px: float = 200.0) -> Camera:

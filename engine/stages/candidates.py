@@ -72,6 +72,7 @@ from engine.render.capsules import (
     PartScorer,
     Target,
     WidthTarget,
+    d_A_subpixel_batch,
     d_S_batch,
     width_robust_cost,
 )
@@ -89,8 +90,9 @@ class CandidateSettings:
     accurate on the synthetic experiment 5.2, where the capsule body matches the image
     exactly; :meth:`exact_body` is the cheaper setting for that case.
     ``NUMBA_NUM_THREADS=1 benchmarks/candidates.py --frames 100`` (E_3B mean deg / E_2P px /
-    E_2M px / s per frame): thesis 6.31 / 1.44 / 8.5 / 5.1, :meth:`exact_body` 6.00 / 1.18 /
-    5.1 / 1.6, these defaults 8.14 / 3.00 / 10.9 / 0.6. The defaults keep their priors
+    E_2M px / s per frame): thesis 6.31 / 1.44 / 8.5 / 5.1, :meth:`exact_body` 5.40 / 0.91 /
+    4.5 / 1.9 (6.00 / 1.18 / 5.1 / 1.6 without its restarts), these defaults 8.14 / 3.00 /
+    10.9 / 0.6. The defaults keep their priors
     towards the reference because on the public videos the body-model mismatch, not the
     search, limits stage 3: :meth:`exact_body` on P1 with the true C(t') and camera
     (``--case``, frames 20-80) selects postures 22 deg from the truth against 1.7 for the
@@ -215,6 +217,27 @@ class CandidateSettings:
         ``escape_lookahead`` best jumps of each torso part are tried as well, each followed
         by the limbs' escape and a refinement (a chest bent the wrong way with both arms
         fitted to it is a basin no single jump leaves). 0 (off) by default.
+    subpixel_rows : int
+        When > 0, the whole-posture d_A (refinement, escape, candidates' d_S) is measured
+        continuously with this many sub-rows per pixel row
+        (:func:`~engine.render.capsules.d_A_subpixel_batch`); BP's per-part scores stay
+        pixel-exact. Beyond the thesis; 0 (off). Measured to change little, so it is off:
+        ``benchmarks/candidates.py --frames 30 --exact`` E_3B 5.60 -> 5.55 deg, E_2P 0.98 ->
+        0.94 px, selected 7.83 -> 8.36 deg, 1.78 -> 2.69 s/frame with 4 sub-rows; on
+        ``benchmarks/cases.py`` mean rank 0.664 -> 0.663, selected 5.356 -> 5.362 deg. The
+        synthetic depth-angle floor is not the pixel grid's.
+    restarts, restart_ds, restart_deg : int, float, float
+        Beyond the thesis; 0 restarts by default, 2 in :meth:`exact_body`. While the
+        estimate's d_S is above ``restart_ds``, BP runs again (at most ``restarts`` times)
+        from the estimate with every part turned by a random angle in +-``restart_deg``
+        about its root joint, then the refinement / escape, and the lower d_S wins. BP's
+        annealing settles into one basin; a fresh start from near the estimate often lands
+        in the right one. :meth:`exact_body` on ``benchmarks/candidates.py --frames 100
+        --exact``: frames stuck in a wrong basin (E_2P > 1.5 px) 16 -> 8, E_2P 1.18 -> 0.91
+        px, E_2M 5.1 -> 4.5 px, E_3B 6.00 -> 5.40 deg, 1.63 -> 1.94 s/frame (one restart:
+        E_2P 1.01, E_3B 5.66; +-15 deg: 0.89, 5.44). Only worth it where a low d_S means a
+        right posture (exact body images): on videos of people d_S never falls that low, so
+        every frame would pay.
     """
 
     n_samples: int = 40
@@ -256,6 +279,10 @@ class CandidateSettings:
     refine_alone: bool = False
     escape_lookahead: int = 0
     escape_lookahead_ds: float = 0.04
+    subpixel_rows: int = 0
+    restarts: int = 0
+    restart_ds: float = 0.02
+    restart_deg: float = 10.0
 
     @classmethod
     def thesis(cls) -> CandidateSettings:
@@ -275,10 +302,11 @@ class CandidateSettings:
     def exact_body(cls) -> CandidateSettings:
         """For images the capsule body matches exactly (the synthetic experiment 5.2).
 
-        The defaults' BP, then the escape and the part-alone refinement (beyond the thesis),
-        no prior towards the initial posture, d_E on (such images have every part's
-        outline). Not for videos of people: there the priors keep the fit near the
-        reference where the body model does not fit the image (see ``prior_weight``).
+        The defaults' BP, then the escape, the part-alone refinement and up to two restarts
+        of BP while the fit is poor (all beyond the thesis), no prior towards the initial
+        posture, d_E on (such images have every part's outline). Not for videos of people:
+        there the priors keep the fit near the reference where the body model does not fit
+        the image (see ``prior_weight``).
         """
         return cls(
             estimator="bp",
@@ -287,6 +315,7 @@ class CandidateSettings:
             escape_dirs=48,
             refine_alone=True,
             occluded_tolerance=0.01,
+            restarts=2,
         )
 
     def validate(self) -> None:
@@ -304,9 +333,14 @@ class CandidateSettings:
             )
         if self.n_candidates < 1:
             raise InvalidInput(f"settings.n_candidates must be >= 1, got {self.n_candidates}")
-        for name in ("escape_dirs", "escape_lookahead"):
+        for name in ("escape_dirs", "escape_lookahead", "subpixel_rows", "restarts"):
             if getattr(self, name) < 0:
                 raise InvalidInput(f"settings.{name} must be >= 0, got {getattr(self, name)}")
+        if not (self.restart_ds >= 0.0 and self.restart_deg >= 0.0):  # also refuses NaN
+            raise InvalidInput(
+                f"settings.restart_ds and restart_deg must be >= 0, got {self.restart_ds}, "
+                f"{self.restart_deg}"
+            )
         if not self.occluded_tolerance >= 0.0:  # also refuses NaN
             raise InvalidInput(
                 f"settings.occluded_tolerance must be >= 0, got {self.occluded_tolerance}"
@@ -431,6 +465,7 @@ class _Scorer:
         self.ds_w, self.w_w = s.ds_weight, s.width_weight
         self.coverage_weight, self.deep_k = s.coverage_weight, s.deep_k
         self.width = WidthTarget.from_mask(target.silhouette) if s.width_weight > 0 else None
+        self.subpixel = s.subpixel_rows
         self.parts = PartScorer(
             target, shape, camera, joints, lambda_A=s.lambda_a, lambda_E=s.lambda_e
         )
@@ -457,16 +492,19 @@ class _Scorer:
     def full(self, postures: np.ndarray) -> np.ndarray:
         self.n_evals += len(postures)
         out = self._width(postures)
-        if self.ds_w > 0:
-            out = out + self.ds_w * d_S_batch(
-                postures,
-                self.target,
-                self.shape,
-                self.camera,
-                lambda_A=self.lam[0],
-                lambda_E=self.lam[1],
+        if self.ds_w <= 0:
+            return out
+        lam_a, lam_e = self.lam
+        if self.subpixel > 0:  # d_A measured continuously, d_E as rendered
+            out = out + self.ds_w * lam_a * d_A_subpixel_batch(
+                postures, self.target, self.shape, self.camera, sub=self.subpixel
             )
-        return out
+            lam_a = 0.0
+            if lam_e == 0.0:
+                return out
+        return out + self.ds_w * d_S_batch(
+            postures, self.target, self.shape, self.camera, lambda_A=lam_a, lambda_E=lam_e
+        )
 
     def visible_fraction(self, joints: np.ndarray) -> np.ndarray:
         """Fraction of each part's projected area that is front-most in ``joints``, (12,).
@@ -547,6 +585,21 @@ def _refine(
             if step < np.radians(s.refine_min_step_deg):
                 break
     return cur, best
+
+
+def perturb_parts(joints: np.ndarray, max_deg: float, rng: np.random.Generator) -> np.ndarray:
+    """Every part (with its subtree) turned about its root joint by U[-max, max] deg.
+
+    About a random axis per part (thesis 5.2.2's perturbed initial posture). ``joints`` (17, 3)
+    -> (17, 3).
+    """
+    out = np.array(joints, dtype=float)
+    for p in range(N_PARTS):
+        J = out[PART_ROOT_JOINT[p]]
+        R = rotation_about_axis(rng.normal(size=3), np.radians(rng.uniform(-max_deg, max_deg)))
+        sub = _SUBTREE_JOINTS[p]
+        out[sub] = J + (out[sub] - J) @ R.T
+    return out
 
 
 def _sphere(n: int) -> np.ndarray:
@@ -976,6 +1029,49 @@ def estimate_candidates(
         if s.estimator == "in_plane":
             return in_plane
 
+    est, history = _bp_estimate(scorer, pool, d0, offsets, s, rng, prior)
+    est = _polish(scorer, [est, pool[0]], camera, s, ref)
+    # beyond the thesis: BP again from the estimate shaken, while the image is not explained
+    for _ in range(s.restarts):
+        d_est = float(scorer.full(est[None])[0])
+        if d_est <= s.restart_ds:
+            break
+        shaken = np.stack([perturb_parts(est, s.restart_deg, rng), est])
+        again, _ = _bp_estimate(scorer, shaken, scorer.full(shaken), offsets, s, rng, prior)
+        again = _polish(scorer, [again], camera, s, ref)
+        if float(scorer.full(again[None])[0]) < d_est:
+            est = again
+
+    # thesis 6.5: totally occluded parts take the reference's pose
+    est = _reset_occluded(scorer, est, orient_src[0], offsets, s, flags)
+    cands = generate_candidates(est, orient_src, camera, s)
+    # Never worse than the start: the initial postures (the reference turned by T_t' and the
+    # previous frame's best) are candidates themselves when they respect the joint limits.
+    starts = [q for q in pool[: len(init) + min(1, len(pool) - len(init))] if limits_ok(q)]
+    if starts:
+        cands = _append_distinct(cands, np.stack(starts), s.n_candidates)
+    if in_plane is not None:
+        keep = in_plane.candidates[: max(1, s.n_candidates // 2)]
+        cands = _append_distinct(keep, cands, s.n_candidates)
+    d_s = scorer.full(cands)
+    prior_cost = s.prior_weight * d_B(cands, ref)
+    return FrameCandidates(cands, d_s, tuple(flags), np.asarray(history), prior_cost)
+
+
+def _bp_estimate(
+    scorer: _Scorer,
+    pool: np.ndarray,
+    d0: np.ndarray,
+    offsets: np.ndarray,
+    s: CandidateSettings,
+    rng: np.random.Generator,
+    prior: Callable[[int, np.ndarray], np.ndarray],
+) -> tuple[np.ndarray, list[float]]:
+    """Nonparametric BP (thesis 4.6.4) from the initial postures ``pool`` (M, 17, 3).
+
+    ``d0`` (M,) is their d_S. Returns the connected best posture (17, 3) and its d_S after each
+    iteration (0 = initial).
+    """
     # initial samples: drawn from the initial postures weighted by their likelihood
     R0 = part_rotations(pool, offsets)  # (M, 12, 3, 3)
     w = np.exp(-s.beta * (d0 - d0.min()))
@@ -1020,26 +1116,23 @@ def estimate_candidates(
         parts = new
         history.append(float(scorer.full(connected()[None])[0]))
 
-    est = connected()
-    if s.escape_dirs > 0:
-        est = _escape_from(scorer, [est, pool[0]], camera, s, ref)
-    elif s.refine_sweeps > 0:
-        est, _ = _refine(scorer, est, camera, s, ref)
+    return connected(), history
 
-    # thesis 6.5: totally occluded parts take the reference's pose
-    est = _reset_occluded(scorer, est, orient_src[0], offsets, s, flags)
-    cands = generate_candidates(est, orient_src, camera, s)
-    # Never worse than the start: the initial postures (the reference turned by T_t' and the
-    # previous frame's best) are candidates themselves when they respect the joint limits.
-    starts = [q for q in pool[: len(init) + min(1, len(pool) - len(init))] if limits_ok(q)]
-    if starts:
-        cands = _append_distinct(cands, np.stack(starts), s.n_candidates)
-    if in_plane is not None:
-        keep = in_plane.candidates[: max(1, s.n_candidates // 2)]
-        cands = _append_distinct(keep, cands, s.n_candidates)
-    d_s = scorer.full(cands)
-    prior_cost = s.prior_weight * d_B(cands, ref)
-    return FrameCandidates(cands, d_s, tuple(flags), np.asarray(history), prior_cost)
+
+def _polish(
+    scorer: _Scorer,
+    starts: list[np.ndarray],
+    camera: Camera,
+    s: CandidateSettings,
+    ref: np.ndarray,
+) -> np.ndarray:
+    """BP's estimate ``starts[0]`` refined (6.4); with the escape on, the escape from every
+    start (17, 3) and the lowest d_S kept."""
+    if s.escape_dirs > 0:
+        return _escape_from(scorer, starts, camera, s, ref)
+    if s.refine_sweeps > 0:
+        return _refine(scorer, starts[0], camera, s, ref)[0]
+    return starts[0]
 
 
 def _in_plane_candidates(

@@ -20,6 +20,7 @@ from engine.stages.candidates import (
     estimate_candidates,
     estimate_candidates_chunk,
     limits_ok,
+    perturb_parts,
 )
 
 SMALL = CandidateSettings(
@@ -179,7 +180,8 @@ def test_estimator_must_be_known():
 @pytest.mark.parametrize(
     "bad",
     [{"escape_dirs": -1}, {"escape_lookahead": -2}, {"occluded_tolerance": -0.1},
-     {"occluded_tolerance": float("nan")}],
+     {"occluded_tolerance": float("nan")}, {"restarts": -1}, {"restart_ds": float("nan")},
+     {"restart_deg": -1.0}, {"subpixel_rows": -1}],
 )  # fmt: skip
 def test_escape_and_occlusion_settings_are_checked(bad: dict) -> None:
     with pytest.raises(InvalidInput, match=next(iter(bad))):
@@ -259,6 +261,31 @@ def test_escape_brings_back_an_arm_started_on_the_other_side() -> None:
         assert limits_ok(fc.candidates).all()
     assert err[0] > 10.0, err  # without the escape the wrist stays far off
     assert err[48] < 3.0, err  # every joint within 3 px on a 100 px body
+
+
+def test_restarts_leave_a_wrong_basin_and_wait_for_a_poor_fit() -> None:
+    # every part 25 deg off (thesis 5.2.2's start, harsher): this start's BP settles with a
+    # wrist 11 px off and d_S 0.12; BP again from its estimate shaken finds the right basin
+    truth = _posture(-30.0)
+    cam = _camera(truth)
+    r = render(truth, SHAPE, cam)
+    init = perturb_parts(truth, 25.0, np.random.default_rng(4))
+    base = replace(SMALL, lambda_e=1.0, prior_weight=0.0)
+    runs = {}
+    for name, extra in (("off", {}), ("on", {"restarts": 2}), ("fit", {"restarts": 2,
+                        "restart_ds": 1.0})):  # fmt: skip
+        fc = estimate_candidates(
+            r.silhouette, r.edges, cam, SHAPE, init, settings=replace(base, **extra),
+            rng=np.random.default_rng(0),
+        )  # fmt: skip
+        best = fc.candidates[int(np.argmin(fc.d_s))]
+        err = np.linalg.norm(cam.project(best) - cam.project(truth), axis=-1).max()
+        runs[name] = (fc, err)
+        assert limits_ok(fc.candidates).all()
+    assert runs["off"][1] > 5.0 and runs["on"][1] < 2.0, (runs["off"][1], runs["on"][1])
+    assert runs["on"][0].d_s.min() < runs["off"][0].d_s.min()
+    # a fit already under restart_ds is left alone (same candidates, same random stream)
+    np.testing.assert_array_equal(runs["fit"][0].candidates, runs["off"][0].candidates)
 
 
 def test_occluded_part_takes_the_reference_pose_where_the_image_allows() -> None:
