@@ -177,6 +177,19 @@ def _bbox(ends: np.ndarray, rad: np.ndarray, caps: np.ndarray, H: int, W: int, m
     return r0, r1, c0, c1
 
 
+@njit(cache=True, inline="always")
+def _insert_span(lo: np.ndarray, hi: np.ndarray, m: int, a: float, b: float) -> int:
+    """Insert span [a, b] into the first ``m`` spans, kept sorted by start; returns m + 1."""
+    j = m
+    while j > 0 and lo[j - 1] > a:
+        lo[j] = lo[j - 1]
+        hi[j] = hi[j - 1]
+        j -= 1
+    lo[j] = a
+    hi[j] = b
+    return m + 1
+
+
 @njit(cache=True)
 def sil_counts(ends: np.ndarray, rad: np.ndarray, prefix: np.ndarray, out: np.ndarray) -> None:
     """Silhouette size and overlap with a target for many postures, without any image.
@@ -215,15 +228,7 @@ def sil_counts(ends: np.ndarray, rad: np.ndarray, prefix: np.ndarray, out: np.nd
                         e[c, 0, 0], e[c, 0, 1], e[c, 1, 0], e[c, 1, 1], rad[c], v, 0, W - 1
                     )
                     if i0 <= i1:
-                        # insertion sort by start column
-                        j = m
-                        while j > 0 and lo[j - 1] > i0:
-                            lo[j] = lo[j - 1]
-                            hi[j] = hi[j - 1]
-                            j -= 1
-                        lo[j] = i0
-                        hi[j] = i1
-                        m += 1
+                        m = _insert_span(lo, hi, m, i0, i1)
             if m == 0:
                 continue
             s = int(lo[0])
@@ -300,14 +305,7 @@ def sil_counts_smooth(
                 a0 = max(a0, xmin)
                 a1 = min(a1, xmax)
                 if a0 < a1:
-                    j = m
-                    while j > 0 and lo[j - 1] > a0:
-                        lo[j] = lo[j - 1]
-                        hi[j] = hi[j - 1]
-                        j -= 1
-                    lo[j] = a0
-                    hi[j] = a1
-                    m += 1
+                    m = _insert_span(lo, hi, m, a0, a1)
             if m == 0:
                 continue
             s = lo[0]
