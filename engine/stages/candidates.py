@@ -234,8 +234,9 @@ class CandidateSettings:
         annealing settles into one basin; a fresh start from near the estimate often lands
         in the right one. :meth:`exact_body` on ``benchmarks/candidates.py --frames 100
         --exact``: frames stuck in a wrong basin (E_2P > 1.5 px) 16 -> 8, E_2P 1.18 -> 0.91
-        px, E_2M 5.1 -> 4.5 px, E_3B 6.00 -> 5.40 deg, 1.63 -> 1.94 s/frame (one restart:
-        E_2P 1.01, E_3B 5.66; +-15 deg: 0.89, 5.44). Only worth it where a low d_S means a
+        px, E_2M 5.1 -> 4.5 px, E_3B 6.00 -> 5.40 deg, 1.63 -> 1.94 s/frame (``--seed 1``:
+        16 -> 6, 1.26 -> 1.09 px, 6.20 -> 5.69 deg; one restart: E_2P 1.01, E_3B 5.66;
+        +-15 deg: 0.89, 5.44). Only worth it where a low d_S means a
         right posture (exact body images): on videos of people d_S never falls that low, so
         every frame would pay.
     """
