@@ -19,6 +19,7 @@ from app.core.queue import get_queue
 from app.main import create_app
 from app.models import Analysis
 from engine.body.skeleton import BONE_NAMES, JOINTS
+from engine.report import ONE_CAMERA_NOTE
 from tests.app.conftest import SAMPLE_BVH, SAMPLE_VIDEO, RecordingQueue
 from web.pages import media
 
@@ -152,6 +153,9 @@ def test_every_page_renders_for_a_coach(env):
     assert "<td>Pat</td>" in rows("/dashboard")
     assert "<td>Pat</td>" not in rows(f"/dashboard?performer={ids['other']}")
     assert "<svg" in client.get(f"/analyses/{aid}/report").text
+    # the limits of one camera are said beside every result
+    for path in (f"/analyses/{aid}", f"/analyses/{aid}/review", f"/analyses/{aid}/report"):
+        assert ONE_CAMERA_NOTE in client.get(path).text, path
 
 
 def test_upload_from_the_page_queues_for_the_signed_in_performer(env):

@@ -18,10 +18,12 @@ from app.api.errors import ApiError
 from app.api.routes.analyses import summarise_segments
 from app.core.reflect import reflect
 from app.models import ANALYSIS_STATES, User
+from engine.report import ONE_CAMERA_NOTE
 from web import invites
 from web.pages import api, media
 
 TEMPLATES = Jinja2Templates(directory=Path(__file__).resolve().parents[1] / "templates")
+TEMPLATES.env.globals["one_camera_note"] = ONE_CAMERA_NOTE
 router = APIRouter(include_in_schema=False)
 
 

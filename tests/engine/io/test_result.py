@@ -99,3 +99,13 @@ def test_candidate_count_must_match(result_doc, rng):
             video={"frames": 11, "fps": 30.0, "width": 320, "height": 240},
             camera=Camera(scale=1.0), selection=sel, candidates=cands[:-1], timing_s={},
         )  # fmt: skip
+
+
+def test_report_is_self_contained_and_says_what_one_camera_measures(result_doc):
+    from engine.report import ONE_CAMERA_NOTE, build_report_html
+
+    page = build_report_html(result_doc)
+    assert page.startswith("<!doctype html>") and page.count("<img") >= 2
+    assert "src=\"http" not in page and "href=" not in page  # nothing loaded from elsewhere
+    assert ONE_CAMERA_NOTE in page
+    assert "lift" in page and "hold" in page  # the domain file's segment names
