@@ -287,3 +287,13 @@ def test_webhook_is_signed_and_retried(client, app, club_ref, queue, video_file)
     assert not verify_webhook(body + b" ", secret, headers["X-Coach-Signature"])
     payload = json.loads(body)
     assert payload["event"] == "analysis.done" and payload["analysis"]["id"] == a["id"]
+
+
+def test_api_docs_say_what_one_camera_measures(client):
+    from engine.report import ONE_CAMERA_NOTE
+
+    paths = client.get("/api/v1/openapi.json").json()["paths"]
+    for what in ("result", "segments"):
+        assert paths[f"/api/v1/analyses/{{analysis_id}}/{what}"]["get"]["description"] == (
+            ONE_CAMERA_NOTE
+        ), what

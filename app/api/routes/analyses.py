@@ -36,6 +36,7 @@ from app.schemas import (
     SegmentsPublic,
 )
 from engine.errors import InvalidInput
+from engine.report import ONE_CAMERA_NOTE
 
 log = logging.getLogger("app.analyses")
 
@@ -230,6 +231,7 @@ def _done(session, club: Club, analysis_id: str, notifier) -> Analysis:
 @router.get(
     "/{analysis_id}/result",
     summary="The result JSON (DESIGN.md) once the analysis is done",
+    description=ONE_CAMERA_NOTE,
     responses={200: {"content": {"application/json": {}}}} | errors(404, 409),
 )
 def read_result(analysis_id: str, club: CurrentClub, session: SessionDep, notifier: NotifierDep):
@@ -271,6 +273,7 @@ def summarise_segments(result: dict[str, Any]) -> list[SegmentPublic]:
     "/{analysis_id}/segments",
     response_model=SegmentsPublic,
     summary="Per-segment summary: timing against the reference and the worst bone",
+    description=ONE_CAMERA_NOTE,
     responses=errors(404, 409),
 )
 def read_segments(analysis_id: str, club: CurrentClub, session: SessionDep, notifier: NotifierDep):
