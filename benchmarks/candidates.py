@@ -273,7 +273,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--thesis", action="store_true", help="thesis settings (slow)")
     ap.add_argument(
-        "--exact", action="store_true", help="CandidateSettings.exact_body() (escape, no prior)"
+        "--exact", action="store_true",
+        help="CandidateSettings.exact_body() (escape, restarts, no prior)",
     )
     ap.add_argument("--set", nargs="*", default=[], help="settings overrides key=value")
     ap.add_argument("--case", help="bench case folder (video.mp4, reference.bvh, truth.json)")

@@ -72,7 +72,7 @@ from engine.render.capsules import (
     PartScorer,
     Target,
     WidthTarget,
-    d_A_subpixel_batch,
+    d_A_batch,
     d_S_batch,
     width_robust_cost,
 )
@@ -220,7 +220,7 @@ class CandidateSettings:
     subpixel_rows : int
         When > 0, the whole-posture d_A (refinement, escape, candidates' d_S) is measured
         continuously with this many sub-rows per pixel row
-        (:func:`~engine.render.capsules.d_A_subpixel_batch`); BP's per-part scores stay
+        (:func:`~engine.render.capsules.d_A_batch`); BP's per-part scores stay
         pixel-exact. Beyond the thesis; 0 (off). Measured to change little, so it is off:
         ``benchmarks/candidates.py --frames 30 --exact`` E_3B 5.60 -> 5.55 deg, E_2P 0.98 ->
         0.94 px, selected 7.83 -> 8.36 deg, 1.78 -> 2.69 s/frame with 4 sub-rows; on
@@ -497,8 +497,8 @@ class _Scorer:
             return out
         lam_a, lam_e = self.lam
         if self.subpixel > 0:  # d_A measured continuously, d_E as rendered
-            out = out + self.ds_w * lam_a * d_A_subpixel_batch(
-                postures, self.target, self.shape, self.camera, sub=self.subpixel
+            out = out + self.ds_w * lam_a * d_A_batch(
+                postures, self.target, self.shape, self.camera, subpixel_rows=self.subpixel
             )
             lam_a = 0.0
             if lam_e == 0.0:
@@ -596,10 +596,8 @@ def perturb_parts(joints: np.ndarray, max_deg: float, rng: np.random.Generator) 
     """
     out = np.array(joints, dtype=float)
     for p in range(N_PARTS):
-        J = out[PART_ROOT_JOINT[p]]
         R = rotation_about_axis(rng.normal(size=3), np.radians(rng.uniform(-max_deg, max_deg)))
-        sub = _SUBTREE_JOINTS[p]
-        out[sub] = J + (out[sub] - J) @ R.T
+        out = _turned(out, p, R[None])[0]
     return out
 
 
@@ -743,8 +741,9 @@ def _escape_from(
 ) -> np.ndarray:
     """The lowest-d_S of ``starts`` (each (17, 3)) after refinement, escape and refinement.
 
-    BP's estimate is one start, the initial posture the other: on the synthetic experiment
-    each ends in a wrong basin where the other does not. When the best still explains the
+    After BP, its estimate is one start and the initial posture the other (on the synthetic
+    experiment each ends in a wrong basin where the other does not); a restart's estimate is
+    the only start. When the best still explains the
     region poorly (d_S above ``s.escape_lookahead_ds``), the ``s.escape_lookahead`` best
     jumps of each torso part are tried too, each with the limbs re-placed by an escape and
     a refinement: a chest bent the wrong way with both arms fitted to it is a basin no

@@ -18,7 +18,6 @@ from engine.render.capsules import (
     Target,
     WidthTarget,
     d_A_batch,
-    d_A_subpixel_batch,
     d_S_batch,
     project_capsules,
     render,
@@ -231,7 +230,7 @@ def test_subpixel_d_A_is_smooth_in_sub_pixel_shifts(rng: np.random.Generator) ->
     j, tgt = _target(rng)
     shifts = np.arange(-10, 11) * 0.1  # pixels
     moved = j[None] + (shifts / CAM.scale)[:, None, None] * np.array([1.0, 0.0, 0.0])
-    d = d_A_subpixel_batch(moved, tgt, SHAPE, CAM)
+    d = d_A_batch(moved, tgt, SHAPE, CAM, subpixel_rows=4)
     # one valley, falling then rising at every 0.1 px step, at the target's own posture up to
     # the target's pixel quantisation (its pixels are whole, the body's outline is not)
     k = int(np.argmin(d))
@@ -240,7 +239,7 @@ def test_subpixel_d_A_is_smooth_in_sub_pixel_shifts(rng: np.random.Generator) ->
     # close to the pixel-centre d_A (the difference is the boundary pixels' partial coverage)
     assert abs(d[10] - d_A_batch(j[None], tgt, SHAPE, CAM)[0]) < 0.05
     off = j + np.array([5.0, 0.0, 0.0])  # off-screen: nothing overlaps
-    assert d_A_subpixel_batch(off[None], tgt, SHAPE, CAM)[0] == 1.0
+    assert d_A_batch(off[None], tgt, SHAPE, CAM, subpixel_rows=4)[0] == 1.0
 
 
 def test_subpixel_overlap_moves_where_pixel_centres_do_not() -> None:
@@ -311,7 +310,7 @@ def test_update_part_keeps_other_caches(rng: np.random.Generator) -> None:
         (lambda t: silhouettes(_rest(), SHAPE, CAM), r"\(N, 17, 3\)"),
         (lambda t: d_S_batch(np.zeros((2, 17, 2)), t, SHAPE, CAM), r"\(N, 17, 3\)"),
         (lambda t: d_A_batch(_rest()[None], t, SHAPE, CAM.with_(width=100)), "target is"),
-        (lambda t: d_A_subpixel_batch(_rest()[None], t, SHAPE, CAM, sub=0), "sub"),
+        (lambda t: d_A_batch(_rest()[None], t, SHAPE, CAM, subpixel_rows=-1), "sub"),
         (lambda t: project_capsules(np.zeros((17, 2)), SHAPE, CAM), "joints"),
         (lambda t: PartScorer(t, SHAPE, CAM, _rest()).score(12, _rest()[None]), "part"),
         (lambda t: PartScorer(t, SHAPE, CAM, _rest()).score(1, _rest()), "joints_samples"),
