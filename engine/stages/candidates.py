@@ -596,8 +596,10 @@ def perturb_parts(joints: np.ndarray, max_deg: float, rng: np.random.Generator) 
     """
     out = np.array(joints, dtype=float)
     for p in range(N_PARTS):
+        J = out[PART_ROOT_JOINT[p]]
         R = rotation_about_axis(rng.normal(size=3), np.radians(rng.uniform(-max_deg, max_deg)))
-        out = _turned(out, p, R[None])[0]
+        sub = _SUBTREE_JOINTS[p]
+        out[sub] = J + (out[sub] - J) @ R.T  # not _turned: its einsum rounds differently
     return out
 
 
