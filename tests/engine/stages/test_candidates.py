@@ -288,6 +288,21 @@ def test_restarts_leave_a_wrong_basin_and_wait_for_a_poor_fit() -> None:
     np.testing.assert_array_equal(runs["fit"][0].candidates, runs["off"][0].candidates)
 
 
+def test_subpixel_rows_score_candidates_with_the_continuous_d_A(flipped) -> None:
+    from engine.render.capsules import Target, d_A_batch
+
+    truth, init, cam, _ = flipped
+    r = render(truth, SHAPE, cam)
+    s = replace(SMALL, subpixel_rows=4)  # lambda_e 0: d_S is d_A alone
+    fc = estimate_candidates(
+        r.silhouette, r.edges, cam, SHAPE, init, settings=s, rng=np.random.default_rng(3)
+    )
+    target = Target.from_masks(r.silhouette, r.edges)
+    smooth = d_A_batch(fc.candidates, target, SHAPE, cam, subpixel_rows=4)
+    np.testing.assert_allclose(fc.d_s, smooth, atol=1e-12)
+    assert not np.allclose(fc.d_s, d_A_batch(fc.candidates, target, SHAPE, cam))
+
+
 def test_occluded_part_takes_the_reference_pose_where_the_image_allows() -> None:
     from engine.render.capsules import Target
     from engine.stages.candidates import _frame_offsets, _reset_occluded, _Scorer
