@@ -328,3 +328,48 @@ def test_occluded_part_takes_the_reference_pose_where_the_image_allows() -> None
     # the defaults (for clothed bodies, whose d_S is no judge of a hidden part) always reset
     forced = _reset_occluded(scorer, truth, sticks_out, offsets, CandidateSettings(), [])
     np.testing.assert_allclose(forced[11] - forced[10], sticks_out[11] - sticks_out[10], atol=1e-9)
+
+
+def test_a_lifted_foot_the_prior_keeps_down_is_flagged_as_misfit() -> None:
+    """The demo's situation: a shin bent back in depth lifts the foot in the picture.
+
+    BP finds it, the in-plane estimate (what selection reports while the prior wins) keeps
+    the foot on the floor, and the default misfit margin flags the frame.
+    """
+    from engine.pipeline import flag_image_misfit
+    from engine.stages.selection import Selection, SelectionSettings
+    from engine.types import Segments
+
+    ref = _posture(0.0)
+    R = np.broadcast_to(np.eye(3), (12, 3, 3)).copy()
+    R[PART_INDEX["l_upper_arm"]] = R[PART_INDEX["l_lower_arm"]] = rotation_about_axis(
+        np.array([0, 0, 1.0]), -0.3
+    )
+    R[PART_INDEX["r_upper_arm"]] = R[PART_INDEX["r_lower_arm"]] = rotation_about_axis(
+        np.array([0, 0, 1.0]), 0.3
+    )
+    R[PART_INDEX["r_lower_leg"]] = rotation_about_axis(np.array([1.0, 0, 0]), np.radians(90))
+    lifted = forward_kinematics(SHAPE.offsets, ref[0], R)
+    cam = _camera(ref)
+    ankle = 6  # r_ankle
+    assert np.linalg.norm(cam.project(lifted)[ankle] - cam.project(ref)[ankle]) > 10
+    s = CandidateSettings(n_candidates=12)  # the defaults' hybrid estimator
+    fcs = []
+    for truth in (ref, lifted):
+        r = render(truth, SHAPE, cam)
+        fcs.append(
+            estimate_candidates(
+                r.silhouette, r.edges, cam, SHAPE, ref, settings=s, rng=np.random.default_rng(1)
+            )
+        )
+    uv = cam.project(fcs[1].candidates)[:, ankle]
+    err = np.linalg.norm(uv - cam.project(lifted)[ankle], axis=-1)
+    assert err[0] > 10 and err.min() < 3, err
+    n = 2
+    sel = Selection(
+        performer_segments=Segments((0,), n - 1), C=np.zeros(n, int), selected=np.zeros(n, int),
+        joints=np.stack([f.candidates[0] for f in fcs]), posture_error=np.zeros(n),
+        bone_errors=np.zeros((n, 16)), flags=((),) * n, segments=(), messages=(),
+    )  # fmt: skip
+    out = flag_image_misfit(sel, [f.d_s for f in fcs], SelectionSettings().misfit_margin)
+    assert [("image_misfit" in f) for f in out.flags] == [False, True]
