@@ -72,6 +72,10 @@ def test_results_overlay_plot_and_cursor_follow_the_video(
     result = json.loads(json.dumps(clip_result))
     note = "The video matches the reported posture poorly in 3 of 12 frames."
     result["summary"]["messages"] = [*result["summary"]["messages"], note]
+    for t, f in enumerate(result["frames"]):  # three frames the video does not confirm
+        f["flags"] = [x for x in f["flags"] if x != "image_misfit"] + (
+            ["image_misfit"] if t in (3, 4, 5) else []
+        )
     aid = server.add_done_analysis("pat", clip, result)
     ctx = browser.new_context(viewport={"width": 1280, "height": 1000})
     page = ctx.new_page()
@@ -82,6 +86,9 @@ def test_results_overlay_plot_and_cursor_follow_the_video(
     page.locator("#stage-box").screenshot(path=str(shots / "overlay.png"))
     assert red > 10 and green > 10, (red, green)
     assert page.locator("#plot-svg polyline").count() >= 2
+    # the misfit frames are shaded on the plot, with a legend entry
+    assert page.locator("#plot-svg .misfit-mark").count() == 3
+    assert "video disagrees" in page.locator("#plot-svg").text_content()
     box = page.locator("#result-messages li")
     assert page.locator("#result-messages").is_visible()
     assert box.count() == len(result["summary"]["messages"])

@@ -16,6 +16,7 @@
   const PARENT = [0, 1, 2, 0, 4, 5, 0, 7, 8, 9, 10, 8, 12, 13, 8, 15];
   const CHILD = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16];
   const PALETTE = ["#1971c2", "#9c36b5", "#e67700", "#0c8599", "#5f3dc4", "#d6336c", "#2f9e44", "#495057"];
+  const MISFIT = "#fab005";  // shading of frames the video does not confirm (image_misfit)
 
   // ---------------------------------------------------------------- progress
   const seenStages = [];
@@ -206,6 +207,13 @@
       const t = svg("text", { x: x(seg.performer_start) + 4, y: T + 12, "font-size": 11, fill: "#5c6675" });
       t.textContent = seg.name; s.append(t);
     });
+    // Frames the video does not confirm (flag image_misfit): their errors may be too small.
+    const misfit = result.frames.map(function (f) { return (f.flags || []).indexOf("image_misfit") >= 0; });
+    const step = (W - L - R) / Math.max(n - 1, 1);
+    misfit.forEach(function (bad, i) {
+      if (!bad) return;
+      s.append(svg("rect", { x: x(i) - step / 2, y: T, width: step, height: H - T - B, fill: MISFIT, "fill-opacity": 0.35, class: "misfit-mark" }));
+    });
     for (let v = 0; v <= top; v += top / 4) {
       s.append(svg("line", { x1: L, x2: W - R, y1: y(v), y2: y(v), stroke: "#e3e6ec" }));
       const t = svg("text", { x: 4, y: y(v) + 4, "font-size": 11, fill: "#5c6675" }); t.textContent = Math.round(v) + "°"; s.append(t);
@@ -224,7 +232,9 @@
     const rt = svg("text", { x: W - R - 70, y: H - 6, "font-size": 11, fill: "#5c6675" }); rt.textContent = "frame " + (n - 1); s.append(rt);
     // Legend.
     let lx = L + 200;
-    [["posture error", "#c92a2a"]].concat(bones.map(function (b, k) { return [BONES[b], PALETTE[k % PALETTE.length]]; })).forEach(function (it) {
+    const items = [["posture error", "#c92a2a"]].concat(bones.map(function (b, k) { return [BONES[b], PALETTE[k % PALETTE.length]]; }));
+    if (misfit.some(Boolean)) items.push(["video disagrees", MISFIT]);
+    items.forEach(function (it) {
       s.append(svg("rect", { x: lx, y: H - 15, width: 14, height: 4, fill: it[1] }));
       const t = svg("text", { x: lx + 18, y: H - 10, "font-size": 11, fill: "#333" }); t.textContent = it[0]; s.append(t);
       lx += 30 + it[0].length * 6;
