@@ -4,7 +4,9 @@ The two public cases share one reference and one background style, so a change t
 can look good on them by luck. This adds four ``coach synth`` cases (one per CMU file in
 ``../shared/data/cmu``, other wall, floor and clothes colours), written once into ``--cache``,
 analyses every case with ``engine.pipeline.analyze`` (optionally with setting overrides) and
-prints the scorer's figures per case and their mean. Two cases run at a time.
+prints the scorer's figures per case and their mean. Two cases run at a time. The demo analysis
+of ``coach serve`` is a seventh case. The last three columns judge the ``image_misfit`` flag:
+the fraction of frames flagged and the true posture error of the flagged and the other frames.
 
     python benchmarks/cases.py [--set '{"foreground": {"min_free_fraction": 0.3}}'] \
         [--cache /tmp/coach-cases] [--jobs 2] [--only syn_64_24]
@@ -26,17 +28,36 @@ sys.path.insert(0, str(REPO))
 SHARED = REPO.parent / "shared"
 # (reference, seed): the synthetic cases of the note of 2026-11-25
 SYNTHETIC = (("64_17", 1), ("64_24", 2), ("64_29", 3), ("64_30", 4))
+# the demo analysis of `coach serve` (app.commands.seed_demo_analysis): a lifted foot and a
+# turned head in the last segment
+DEMO = ("64_29", 7, ("--fps", "15", "--n-wrong", "1", "--error-deg", "25"))
 
 
-def synthetic_case(name: str, seed: int, cache: Path) -> Path:
-    """``coach synth REF --seed SEED --max-frames 160`` into ``cache`` (once)."""
-    out = cache / f"syn_{name}_{seed}"
+def synthetic_case(name: str, seed: int, cache: Path, extra: tuple[str, ...] = ()) -> Path:
+    """``coach synth REF --seed SEED --max-frames 160 [EXTRA]`` into ``cache`` (once)."""
+    out = cache / (f"demo_{name}_{seed}" if extra else f"syn_{name}_{seed}")
     if not (out / "truth.json").exists():
         from engine.cli import main as coach
 
         ref = SHARED / "data" / "cmu" / f"{name}.bvh"
-        coach(["synth", str(ref), str(out), "--seed", str(seed), "--max-frames", "160"])
+        coach(["synth", str(ref), str(out), "--seed", str(seed), "--max-frames", "160", *extra])
     return out
+
+
+def misfit_figures(truth: dict, result: dict) -> dict:
+    """How well the ``image_misfit`` flag points at the frames with large true errors.
+
+    Fraction of frames flagged, and the mean true posture error (deg) of the flagged and of
+    the other frames.
+    """
+    eps = np.array([np.mean(f["bone_errors_deg"]) for f in truth["frames"]])
+    flagged = {f["t"] for f in result["frames"] if "image_misfit" in f.get("flags", ())}
+    bad = np.array([f["t"] in flagged for f in truth["frames"]])
+    return {
+        "misfit_fraction": float(bad.mean()),
+        "true_err_misfit_deg": float(eps[bad].mean()) if bad.any() else float("nan"),
+        "true_err_ok_deg": float(eps[~bad].mean()) if (~bad).any() else float("nan"),
+    }
 
 
 def score_case(case: Path, settings: dict) -> dict:
@@ -48,7 +69,7 @@ def score_case(case: Path, settings: dict) -> dict:
     result = analyze(case / "reference.bvh", case / "video.mp4", settings)
     truth = json.loads((case / "truth.json").read_text())
     public = next((SHARED / "bench" / "cases").iterdir())  # any case finds the scorer
-    return load_scorer(public).score(truth, result)
+    return {**load_scorer(public).score(truth, result), **misfit_figures(truth, result)}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -62,14 +83,17 @@ def main(argv: list[str] | None = None) -> int:
     args.cache.mkdir(parents=True, exist_ok=True)
     cases = sorted((SHARED / "bench" / "cases").iterdir())
     cases += [synthetic_case(name, seed, args.cache) for name, seed in SYNTHETIC]
+    cases.append(synthetic_case(DEMO[0], DEMO[1], args.cache, DEMO[2]))
     cases = [c for c in cases if args.only in c.name]
     with ProcessPoolExecutor(args.jobs) as pool:
         scores = list(pool.map(score_case, cases, [settings] * len(cases)))
-    print(f"{'case':24s}" + "".join(f"{k:>10s}" for k, _ in KEYS))
+    keys = (*KEYS, ("misfit", "misfit_fraction"), ("err|misfit", "true_err_misfit_deg"),
+            ("err|ok", "true_err_ok_deg"))  # fmt: skip
+    print(f"{'case':24s}" + "".join(f"{k:>11s}" for k, _ in keys))
     for case, s in zip(cases, scores, strict=True):
-        print(f"{case.name[:24]:24s}" + "".join(f"{s.get(k, float('nan')):10.3f}" for _, k in KEYS))
-    means = [np.nanmean([s.get(k, np.nan) for s in scores]) for _, k in KEYS]
-    print(f"{'mean':24s}" + "".join(f"{m:10.3f}" for m in means))
+        print(f"{case.name[:24]:24s}" + "".join(f"{s.get(k, float('nan')):11.3f}" for _, k in keys))
+    means = [np.nanmean([s.get(k, np.nan) for s in scores]) for _, k in keys]
+    print(f"{'mean':24s}" + "".join(f"{m:11.3f}" for m in means))
     return 0
 
 
