@@ -120,6 +120,10 @@ def _error_plot_png(result: dict[str, Any]) -> str:
         mid = (s["performer_start"] + s["performer_end"]) / 2
         ax.text(mid, 1.0, s.get("name", str(j + 1)), transform=ax.get_xaxis_transform(),
                 ha="center", va="bottom", fontsize=8)  # fmt: skip
+    misfit = [i for i, f in enumerate(result["frames"]) if "image_misfit" in f.get("flags", ())]
+    for k, i in enumerate(misfit):  # frames the video does not confirm: errors may be too small
+        ax.axvspan(t[i] - 0.5, t[i] + 0.5, color="#fab005", alpha=0.35, lw=0,
+                   label="video disagrees (image_misfit)" if k == 0 else None)  # fmt: skip
     ax.plot(t, eps, color="k", lw=1.2, label="posture error eps_t'")
     if "score_deg" in result["frames"][0]:
         ax.plot(

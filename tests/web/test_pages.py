@@ -255,3 +255,11 @@ def test_joint_angles_of_a_right_angle():
     names = [a[0] for a in media.JOINT_ANGLES]
     k = next(i for i, n in enumerate(names) if n.startswith("angle_l_knee_deg"))
     assert media.joint_angles_deg(j)[0, k] == pytest.approx(90.0)
+
+
+def test_printable_plot_shades_the_frames_the_video_does_not_confirm():
+    result = fake_result()
+    assert "misfit-mark" not in media.error_plot_svg(result)
+    for t in (2, 3):
+        result["frames"][t]["flags"] = ["image_misfit"]
+    assert media.error_plot_svg(result).count('class="misfit-mark"') == 2

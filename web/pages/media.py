@@ -366,6 +366,14 @@ def error_plot_svg(result: dict[str, Any], *, width: int = 720, height: int = 18
     pts = " ".join(f"{x(i):.1f},{y(v):.1f}" for i, v in enumerate(np.nan_to_num(err)))
     parts = [f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {width} {height}" '
              f'class="plot" role="img" aria-label="posture error per frame">']  # fmt: skip
+    # frames the video does not confirm (image_misfit): their errors may be too small
+    step = (width - pad - 6) / n
+    for i, f in enumerate(frames):
+        if "image_misfit" in (f.get("flags") or ()):
+            parts.append(
+                f'<rect class="misfit-mark" x="{x(i) - step / 2:.1f}" y="6" width="{step:.1f}" '
+                f'height="{height - 26}" fill="#fab005" fill-opacity="0.35"/>'
+            )
     for s in result.get("segments") or []:
         parts.append(
             f'<line x1="{x(s["performer_start"]):.1f}" x2="{x(s["performer_start"]):.1f}" '

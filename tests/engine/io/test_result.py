@@ -109,3 +109,16 @@ def test_report_is_self_contained_and_says_what_one_camera_measures(result_doc):
     assert "src=\"http" not in page and "href=" not in page  # nothing loaded from elsewhere
     assert ONE_CAMERA_NOTE in page
     assert "lift" in page and "hold" in page  # the domain file's segment names
+
+
+def test_report_plot_shades_the_frames_the_video_does_not_confirm(result_doc):
+    import copy
+
+    from engine.report import _error_plot_png
+
+    flagged = copy.deepcopy(result_doc)
+    for f in flagged["frames"]:
+        f["flags"] = [x for x in f["flags"] if x != "image_misfit"]
+    plain = _error_plot_png(flagged)
+    flagged["frames"][1]["flags"].append("image_misfit")
+    assert _error_plot_png(flagged) != plain
