@@ -209,9 +209,16 @@ class Progress:
     """
 
     def __init__(
-        self, job: AnalysisJob, task_stage: str, lo: float, hi: float, publish: Publish | None
+        self,
+        job: AnalysisJob,
+        task_stage: str,
+        lo: float,
+        hi: float,
+        publish: Publish | None,
+        label: str = "",
     ):
         self.job, self.task_stage, self.lo, self.hi, self.publish = job, task_stage, lo, hi, publish
+        self.label = label  # e.g. "chunk 2 of 4": the fraction below is this task's, not the bar's
         self._last_write = 0.0
         self._last_stage = ""
 
@@ -222,7 +229,7 @@ class Progress:
         if stage == self._last_stage and now - self._last_write < _STATUS_INTERVAL_S:
             return
         self._last_stage, self._last_write = stage, now
-        self.report(stage, progress, f"{stage} {100 * fraction:.0f}%")
+        self.report(stage, progress, f"{self.label or stage}: {100 * fraction:.0f} % done")
 
     def report(self, stage: str, progress: float, message: str) -> None:
         # Parallel chunks each know only their own share: never move the shared bar back.
@@ -331,8 +338,11 @@ def run_candidates(
     lo, hi = _SPAN["candidates"]
     done = sum(p.exists() for p in paths.chunks(n_chunks))
     step = (hi - lo) / n_chunks
-    progress = Progress(job, "candidates", lo + done * step, lo + (done + 1) * step, publish)
-    progress.report("candidates", lo + done * step, f"candidates chunk {index + 1}/{n_chunks}")
+    label = f"frames {frames.start}-{frames.stop - 1} (part {index + 1} of {n_chunks})"
+    progress = Progress(
+        job, "candidates", lo + done * step, lo + (done + 1) * step, publish, label=label
+    )
+    progress.report("candidates", lo + done * step, f"{label}: started")
     started = time.monotonic()
     chunk = pipeline.candidates(prepared, frames, job.settings or None, on_progress=progress)
     check_cancel(job)

@@ -59,9 +59,12 @@ def test_upload_through_the_page_runs_to_results(server, browser, clip, shots):
     page.wait_for_url("**/analyses/*", timeout=30_000)
     page.wait_for_function("document.getElementById('stage-bar').value > 0", timeout=60_000)
     page.screenshot(path=str(shots / "progress.png"), full_page=True)
+    assert page.locator("#stage-pct").inner_text().endswith("% overall")
     wait_results(page, timeout_ms=170_000)
     assert page.locator("#progress-view").is_hidden()
-    assert page.locator("#stage-list li").count() >= 1  # stage names came over the stream
+    # stage names came over the stream, said in the performer's words
+    stages = page.locator("#stage-list li").all_inner_texts()
+    assert stages and all(len(s.split()) >= 2 for s in stages), stages
     assert page.locator("#plot svg polyline").count() >= 1
     ctx.close()
 

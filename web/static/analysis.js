@@ -20,18 +20,31 @@
 
   // ---------------------------------------------------------------- progress
   const seenStages = [];
+  // What each pipeline stage does, in the performer's words (worker and engine stage names).
+  const STAGE_TEXT = {
+    queued: "Waiting for a free worker",
+    prepare: "Preparing",
+    foreground: "Separating you from the background",
+    calibration: "Calibrating the camera",
+    alignment: "Matching your timing to the expert's",
+    candidates: "Finding possible postures, frame by frame",
+    select: "Choosing postures and measuring the differences",
+    selection: "Choosing postures and measuring the differences",
+  };
+  function stageText(s) { return STAGE_TEXT[s] || s; }
   function showProgress(a) {
     root.dataset.status = a.status;
     const pct = Math.round(100 * (a.progress || 0));
-    $("stage-name").textContent = a.stage || a.status;
-    $("stage-pct").textContent = pct + " %";
+    $("stage-name").textContent = stageText(a.stage || a.status);
+    $("stage-pct").textContent = pct + " % overall";
     $("stage-bar").value = pct;
     $("stage-message").textContent = a.message || "";
-    if (a.stage && seenStages.indexOf(a.stage) < 0) seenStages.push(a.stage);
+    const current = a.stage ? stageText(a.stage) : "";
+    if (current && seenStages.indexOf(current) < 0) seenStages.push(current);
     const ol = $("stage-list");
     ol.textContent = "";
     seenStages.forEach(function (s) {
-      const done = a.status === "done" || s !== a.stage;
+      const done = a.status === "done" || s !== current;
       ol.append(coach.el("li", { class: done ? "done" : "current", text: (done ? "✓ " : "") + s }));
     });
     if (a.error) { $("analysis-error").textContent = a.error; $("analysis-error").hidden = false; }
