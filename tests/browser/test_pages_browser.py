@@ -97,6 +97,12 @@ def test_results_overlay_plot_and_cursor_follow_the_video(
     assert box.count() == len(result["summary"]["messages"])
     assert box.last.inner_text() == note
     assert page.locator(".seg-card").count() == len(clip_result["segments"])
+    # the card of the segment holding the misfit frames says so, the others do not
+    warned = page.locator(".seg-card .seg-misfit")
+    assert warned.count() == len({i for i, s in enumerate(result["segments"])
+                                  if s["performer_start"] <= 5 and s["performer_end"] >= 3})
+    counts = [int(t.split("disagrees in ")[1].split()[0]) for t in warned.all_inner_texts()]
+    assert sum(counts) >= 3, counts  # a boundary frame belongs to both of its segments
     page.wait_for_selector("#viewer3d:not([hidden]), #fallback3d:not([hidden])", timeout=30_000)
     page.wait_for_timeout(1500)  # let the 3D view draw
     page.screenshot(path=str(shots / "results.png"), full_page=True)

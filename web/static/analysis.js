@@ -290,15 +290,22 @@
     const box = $("segment-cards");
     box.textContent = "";
     summary.segments.forEach(function (s, i) {
+      // A small error where the video disagrees is not a good mark: say so on the card.
+      let misfit = 0;
+      for (let t = s.performer_start; t <= s.performer_end && t < n; t++) {
+        if ((result.frames[t].flags || []).indexOf("image_misfit") >= 0) misfit++;
+      }
+      const span = s.performer_end - s.performer_start + 1;
+      const warn = misfit ? coach.el("span", { class: "seg-misfit", text: "⚠ the video disagrees in " + misfit + " of " + span + " frames: look at them yourself" }) : null;
       const card = coach.el("button", { type: "button", class: "seg-card", "data-index": i,
-        "aria-label": s.name + ": mean error " + s.mean_error_deg.toFixed(0) + " degrees; go to its first frame" }, [
+        "aria-label": s.name + ": mean error " + s.mean_error_deg.toFixed(0) + " degrees" + (misfit ? ", but the video disagrees in " + misfit + " frames" : "") + "; go to its first frame" }, [
         coach.el("h3", { text: s.name }),
         coach.el("span", { class: "score", text: (s.score != null ? s.score : s.mean_error_deg).toFixed(0) + "°" }),
         coach.el("span", { class: "muted", text: "frames " + s.performer_start + "–" + s.performer_end }),
         coach.el("span", { text: tempoText(s.tempo_ratio) }),
         coach.el("ul", {}, s.worst_bones.map(function (wb) { return coach.el("li", { text: wb[0] + ": " + wb[1].toFixed(0) + "°" }); })),
-      ]);
-      card.style.borderLeftColor = coach.errorColor(s.mean_error_deg);
+      ].concat(warn ? [warn] : []));
+      card.style.borderLeftColor = misfit ? MISFIT : coach.errorColor(s.mean_error_deg);
       card.addEventListener("click", function () { video.pause(); seek(s.performer_start); });
       box.append(card);
     });
