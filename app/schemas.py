@@ -153,6 +153,9 @@ class SegmentPublic(BaseModel):
     worst_bone: str | None
     worst_bone_error_deg: float | None
     bone_mean_errors_deg: dict[str, float]
+    #: Frames of the segment whose reported posture the video does not confirm (flag
+    #: ``image_misfit``): the errors there may be underestimated.
+    misfit_frames: int = 0
 
 
 class SegmentsPublic(BaseModel):

@@ -16,7 +16,7 @@ RESULT = {
     "version": 1,
     "reference": {"name": "swing", "frames": 580, "fps": 120.0},
     "video": {"frames": 137, "fps": 30.0, "width": 320, "height": 240},
-    "frames": [],
+    "frames": [{"t": t, "flags": ["image_misfit"] if t in (5, 6) else []} for t in range(71)],
     "segments": [
         {"reference_start": 1, "reference_end": 241, "performer_start": 0,
          "performer_end": 70, "mean_error_deg": 9.5,
@@ -190,6 +190,7 @@ def test_progress_is_reflected_and_result_is_409_until_done(client, club_ref, qu
     seg = client.get(url + "/segments", headers=h).json()["segments"][0]
     assert seg["worst_bone"] == "l_elbow->l_wrist" and seg["worst_bone_error_deg"] == 30.0
     assert seg["tempo_ratio"] == pytest.approx((70 / 30) / (240 / 120))
+    assert seg["misfit_frames"] == 2  # frames whose posture the video does not confirm
     status(work, "running", 0.1)  # a final state in the database is never undone
     assert client.get(url, headers=h).json()["status"] == "done"
 

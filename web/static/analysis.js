@@ -291,10 +291,9 @@
     box.textContent = "";
     summary.segments.forEach(function (s, i) {
       // A small error where the video disagrees is not a good mark: say so on the card.
-      let misfit = 0;
-      for (let t = s.performer_start; t <= s.performer_end && t < n; t++) {
-        if ((result.frames[t].flags || []).indexOf("image_misfit") >= 0) misfit++;
-      }
+      const misfit = result.frames.filter(function (f) {
+        return f.t >= s.performer_start && f.t <= s.performer_end && (f.flags || []).indexOf("image_misfit") >= 0;
+      }).length;
       const span = s.performer_end - s.performer_start + 1;
       const warn = misfit ? coach.el("span", { class: "seg-misfit", text: "⚠ the video disagrees in " + misfit + " of " + span + " frames: look at them yourself" }) : null;
       const card = coach.el("button", { type: "button", class: "seg-card", "data-index": i,

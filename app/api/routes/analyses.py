@@ -241,6 +241,9 @@ def read_result(analysis_id: str, club: CurrentClub, session: SessionDep, notifi
 
 def summarise_segments(result: dict[str, Any]) -> list[SegmentPublic]:
     out = []
+    misfit = {
+        f["t"] for f in result.get("frames") or [] if "image_misfit" in (f.get("flags") or ())
+    }
     for i, seg in enumerate(result.get("segments") or []):
         bones = [float(e) for e in seg.get("bone_mean_errors_deg") or []]
         named = dict(zip(BONE_NAMES, bones, strict=False))
@@ -264,6 +267,9 @@ def summarise_segments(result: dict[str, Any]) -> list[SegmentPublic]:
                 worst_bone=worst,
                 worst_bone_error_deg=named[worst] if worst else None,
                 bone_mean_errors_deg=named,
+                misfit_frames=sum(
+                    seg["performer_start"] <= t <= seg["performer_end"] for t in misfit
+                ),
             )
         )
     return out
