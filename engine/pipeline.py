@@ -350,16 +350,45 @@ def select(
     timing["selection"] = time.perf_counter() - t0
     timing["total"] = float(sum(timing.values()))
     v = prepared.video
-    return build_result(
+    camera = original_pixels(prepared.camera, v["original_width"], v["original_height"])
+    doc = build_result(
         reference_name=prepared.reference_name,
         reference_frames=int(prepared.reference_joints.shape[0]),
         reference_fps=prepared.reference_fps,
         video={"frames": v["frames"], "fps": v["fps"], "width": v["original_width"],
                "height": v["original_height"]},
-        camera=original_pixels(prepared.camera, v["original_width"], v["original_height"]),
-        selection=selection, candidates=cands, timing_s=timing, domain=domain,
+        camera=camera, selection=selection, candidates=cands, timing_s=timing, domain=domain,
         video_frame_offset=int(v.get("offset", 0)),
     )  # fmt: skip
+    add_image_best(doc, cands, d_s, camera)
+    return doc
+
+
+def add_image_best(
+    doc: dict, candidates: Sequence[np.ndarray], d_s: Sequence[np.ndarray], camera: Camera
+) -> None:
+    """In ``image_misfit`` frames, the candidate that explains the video best (beyond the thesis).
+
+    Adds ``image_best`` (its index in ``candidates``) and ``image_best_joints_2d`` (its
+    projection, video pixels) to those frames of the result ``doc``, so a coach can see what
+    the video suggests where it disagrees with the reported posture (a lifted foot the prior
+    keeps down). Its depth is as uncertain as any single-view posture's.
+
+    Parameters
+    ----------
+    doc : dict
+        The result document (DESIGN.md), changed in place.
+    candidates : list of ndarray, shape (K_t', 17, 3) each
+    d_s : list of ndarray, shape (K_t',) each
+    camera : Camera
+        In the video file's pixels (the result's ``joints_2d``).
+    """
+    for f, cands, d in zip(doc["frames"], candidates, d_s, strict=True):
+        if "image_misfit" not in f["flags"]:
+            continue
+        k = int(np.argmin(d))
+        f["image_best"] = k
+        f["image_best_joints_2d"] = np.round(camera.project(cands[k]), 2).tolist()
 
 
 def flag_image_misfit(

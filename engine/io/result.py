@@ -181,11 +181,12 @@ def validate_result(doc: Any) -> None:
     if doc["joints"] != list(JOINTS):
         raise InvalidInput(f"result joints: expected {list(JOINTS)}")
     for i, f in enumerate(doc["frames"]):
-        if f["selected"] >= len(f["candidates"]):
-            raise InvalidInput(
-                f"result frames/{i}/selected: {f['selected']} is not an index into "
-                f"{len(f['candidates'])} candidates"
-            )
+        for key in ("selected", "image_best"):
+            if f.get(key, 0) >= len(f["candidates"]):
+                raise InvalidInput(
+                    f"result frames/{i}/{key}: {f[key]} is not an index into "
+                    f"{len(f['candidates'])} candidates"
+                )
     for i, s in enumerate(doc["segments"]):
         if s["performer_end"] < s["performer_start"] or s["reference_end"] < s["reference_start"]:
             raise InvalidInput(f"result segments/{i}: a segment ends before it starts")

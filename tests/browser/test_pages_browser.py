@@ -28,6 +28,17 @@ def canvas_colours(page, selector: str) -> tuple[int, int]:
     return int(red.sum()), int(green.sum())
 
 
+def amber_pixels(page) -> int:
+    """Pixels of the overlay canvas in the misfit amber #fab005."""
+    data = page.evaluate(
+        """() => { const c = document.querySelector('#overlay');
+             return Array.from(c.getContext('2d').getImageData(0, 0, c.width, c.height).data); }"""
+    )
+    rgba = np.asarray(data, np.int32).reshape(-1, 4)
+    near = np.abs(rgba[:, :3] - np.array([250, 176, 5])).max(1) <= 6
+    return int((near & (rgba[:, 3] > 200)).sum())
+
+
 def most_colourful_frame(result: dict) -> int:
     """The frame whose worst bone is worst (red) while another bone is near zero (green)."""
     e = np.array([f["bone_errors_deg"] for f in result["frames"]])
@@ -79,6 +90,10 @@ def test_results_overlay_plot_and_cursor_follow_the_video(
         f["flags"] = [x for x in f["flags"] if x != "image_misfit"] + (
             ["image_misfit"] if t in (3, 4, 5) else []
         )
+        f.pop("image_best", None)
+        f.pop("image_best_joints_2d", None)
+        if t == 4:  # what the video suggests there: the posture 25 px to the right
+            f["image_best_joints_2d"] = [[u + 25.0, v] for u, v in f["joints_2d"]]
     aid = server.add_done_analysis("pat", clip, result)
     ctx = browser.new_context(viewport={"width": 1280, "height": 1000})
     page = ctx.new_page()
@@ -89,6 +104,12 @@ def test_results_overlay_plot_and_cursor_follow_the_video(
     page.locator("#stage-box").screenshot(path=str(shots / "overlay.png"))
     assert red > 10 and green > 10, (red, green)
     assert page.locator("#plot-svg polyline").count() >= 2
+    # frame 4's dashed amber skeleton (exact #fab005; the error colours all have blue 13)
+    assert page.locator("#legend-image-best").is_visible()
+    go_to_frame(page, 0)
+    assert amber_pixels(page) == 0
+    go_to_frame(page, 4)
+    assert amber_pixels(page) > 50
     # the misfit frames are shaded on the plot, with a legend entry
     assert page.locator("#plot-svg .misfit-mark").count() == 3
     assert "video disagrees" in page.locator("#plot-svg").text_content()

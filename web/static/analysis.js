@@ -122,6 +122,7 @@
     overlay.width = result.video.width; overlay.height = result.video.height;
     video.src = base + "/video.mp4";
     showMessages((result.summary && result.summary.messages) || []);
+    $("legend-image-best").hidden = !result.frames.some(function (f) { return f.image_best_joints_2d; });
     buildBonePicks(); buildPlot(); buildSegments(); loadComments(); start3d();
     $("plot").setAttribute("aria-valuemax", String(n - 1));
     setFrame(0, true);
@@ -179,6 +180,15 @@
     }
     ctx.fillStyle = "#fff";
     p.forEach(function (q) { ctx.beginPath(); ctx.arc(q[0], q[1], w * 0.6, 0, 2 * Math.PI); ctx.fill(); });
+    // Where the video disagrees: the posture that fits the video best, dashed.
+    const g = fr.image_best_joints_2d;
+    if (!g) return;
+    ctx.setLineDash([w * 2, w * 1.5]);
+    ctx.strokeStyle = MISFIT; ctx.lineWidth = w;
+    for (let b = 0; b < 16; b++) {
+      ctx.beginPath(); ctx.moveTo(g[PARENT[b]][0], g[PARENT[b]][1]); ctx.lineTo(g[CHILD[b]][0], g[CHILD[b]][1]); ctx.stroke();
+    }
+    ctx.setLineDash([]);
   }
 
   // ---------------------------------------------------------------- timeline

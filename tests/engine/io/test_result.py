@@ -65,6 +65,7 @@ def test_built_result_is_valid_and_round_trips(result_doc, tmp_path):
         (lambda d: d.pop("frames"), "'frames' is a required property"),
         (lambda d: d["frames"][2]["joints_3d"].pop(), r"frames/2/joints_3d"),
         (lambda d: d["frames"][0].update(selected=5), r"frames/0/selected: 5 is not an index"),
+        (lambda d: d["frames"][0].update(image_best=2), r"frames/0/image_best: 2 is not an"),
         (lambda d: d["frames"][1].update(posture_error_deg=-1.0), r"frames/1/posture_error_deg"),
         (lambda d: d["segments"][0].update(bone_mean_errors_deg=[1.0] * 15), r"segments/0/bone"),
         (lambda d: d["segments"][1].update(performer_end=0), r"segments/1: a segment ends"),
@@ -122,3 +123,21 @@ def test_report_plot_shades_the_frames_the_video_does_not_confirm(result_doc):
     plain = _error_plot_png(flagged)
     flagged["frames"][1]["flags"].append("image_misfit")
     assert _error_plot_png(flagged) != plain
+
+
+def test_misfit_frames_carry_the_candidate_the_video_fits_best(result_doc):
+    from engine.pipeline import add_image_best
+
+    doc = copy.deepcopy(result_doc)
+    for f in doc["frames"]:
+        f["flags"] = [x for x in f["flags"] if x != "image_misfit"]
+    doc["frames"][2]["flags"].append("image_misfit")
+    cands = [np.array(f["candidates"]) for f in doc["frames"]]
+    d_s = [np.array([0.3, 0.1]) for _ in cands]  # the second candidate fits the video better
+    cam = Camera(scale=100.0, cx=160.0, cy=200.0)
+    add_image_best(doc, cands, d_s, cam)
+    validate_result(doc)
+    assert [("image_best" in f) for f in doc["frames"]] == [t == 2 for t in range(11)]
+    assert doc["frames"][2]["image_best"] == 1
+    np.testing.assert_allclose(doc["frames"][2]["image_best_joints_2d"],
+                               cam.project(cands[2][1]), atol=0.01)  # fmt: skip
