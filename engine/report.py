@@ -57,8 +57,15 @@ def _png_b64(rgb: np.ndarray) -> str:
     return base64.b64encode(buf.tobytes()).decode("ascii")
 
 
+#: Colour of what the video suggests where it disagrees (image_misfit frames), RGB.
+MISFIT_RGB = (250, 176, 5)
+
+
 def draw_skeleton(
-    rgb: np.ndarray, joints_2d: np.ndarray, bone_errors_deg: np.ndarray
+    rgb: np.ndarray,
+    joints_2d: np.ndarray,
+    bone_errors_deg: np.ndarray,
+    video_suggests: np.ndarray | None = None,
 ) -> np.ndarray:
     """A copy of a video frame with the skeleton drawn over it.
 
@@ -68,6 +75,9 @@ def draw_skeleton(
     joints_2d : ndarray, shape (17, 2)
         (u, v) pixels.
     bone_errors_deg : ndarray, shape (16,)
+    video_suggests : ndarray, shape (17, 2), optional
+        The candidate that fits the video best (a frame's ``image_best_joints_2d``), drawn
+        dashed in amber over the skeleton.
 
     Returns
     -------
@@ -89,7 +99,24 @@ def draw_skeleton(
         )
     for p in pts:
         cv2.circle(out, (int(p[0]), int(p[1])), thick, (255, 255, 255), -1, cv2.LINE_AA)
+    if video_suggests is not None:
+        g = np.asarray(video_suggests, float)
+        for b in range(len(BONE_NAMES)):
+            _dashed_line(out, g[BONE_PARENT[b]], g[BONE_CHILD[b]], MISFIT_RGB, thick, 4 * thick)
     return out
+
+
+def _dashed_line(
+    img: np.ndarray, a: np.ndarray, b: np.ndarray, color: tuple[int, ...], thick: int, dash: int
+) -> None:
+    """cv2 has no dashed lines: draw every other piece of ``dash`` pixels from a to b."""
+    length = float(np.linalg.norm(b - a))
+    n = max(1, int(length // dash))
+    for k in range(0, n, 2):
+        p = a + (b - a) * k / n
+        q = a + (b - a) * min(k + 1, n) / n
+        cv2.line(img, (int(round(p[0])), int(round(p[1]))), (int(round(q[0])), int(round(q[1]))),
+                 color, thick, cv2.LINE_AA)  # fmt: skip
 
 
 def _strip_frames(result: dict[str, Any], n: int) -> list[int]:
@@ -179,7 +206,10 @@ def build_report_html(
             if video_frames is not None and i < len(video_frames)
             else np.full((h, w, 3), 60, np.uint8)
         )
-        drawn = draw_skeleton(img, np.asarray(f["joints_2d"]), np.asarray(f["bone_errors_deg"]))
+        drawn = draw_skeleton(
+            img, np.asarray(f["joints_2d"]), np.asarray(f["bone_errors_deg"]),
+            f.get("image_best_joints_2d"),
+        )  # fmt: skip
         cap = f"t'={f['t']} &rarr; t={f['reference_frame']}, {f['posture_error_deg']:.1f}&deg;"
         strip.append(
             f'<figure><img alt="frame {f["t"]}" src="data:image/png;base64,{_png_b64(drawn)}">'

@@ -263,3 +263,10 @@ def test_printable_plot_shades_the_frames_the_video_does_not_confirm():
     for t in (2, 3):
         result["frames"][t]["flags"] = ["image_misfit"]
     assert media.error_plot_svg(result).count('class="misfit-mark"') == 2
+
+
+def test_report_stills_show_a_segment_where_the_video_disagrees():
+    result = fake_result()  # errors grow with t: segment 1's worst frame is its last
+    first = media.still_frames(result, n=2)
+    result["frames"][1]["flags"] = ["image_misfit"]
+    assert 1 not in first and 1 in media.still_frames(result, n=2)

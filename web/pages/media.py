@@ -207,7 +207,11 @@ REPORT_STILLS = 4
 
 
 def still_frames(result: dict[str, Any], n: int = REPORT_STILLS) -> list[int]:
-    """Indices into ``result["frames"]``: each segment's worst frame, then evenly spaced."""
+    """Indices into ``result["frames"]``: each segment's worst frame, then evenly spaced.
+
+    A segment with frames the video does not confirm (``image_misfit``) shows the worst of
+    those instead, where the dashed posture tells what the reported one misses.
+    """
     frames = result.get("frames") or []
     if not frames:
         return []
@@ -216,8 +220,11 @@ def still_frames(result: dict[str, Any], n: int = REPORT_STILLS) -> list[int]:
     for seg in result.get("segments") or []:
         a, b = int(seg["performer_start"]), int(seg["performer_end"])
         inside = [t_to_i[t] for t in range(a, b + 1) if t in t_to_i]
+        misfit = [i for i in inside if "image_misfit" in (frames[i].get("flags") or ())]
         worst = seg.get("worst_frame")
-        if worst is not None and int(worst) in t_to_i:
+        if misfit:
+            i = max(misfit, key=lambda k: float(frames[k]["posture_error_deg"]))
+        elif worst is not None and int(worst) in t_to_i:
             i = t_to_i[int(worst)]
         elif inside:
             i = max(inside, key=lambda k: float(frames[k]["posture_error_deg"]))
@@ -275,8 +282,13 @@ def report_stills(
                 if w > 480:  # print resolution, not the upload's
                     h, w = round(h * 480 / w), 480
                     rgb = cv2.resize(rgb, (w, h), interpolation=cv2.INTER_AREA)
-                j2 = np.asarray(f["joints_2d"], float) * [w / (vw or w), h / (vh or h)]
-                drawn = draw_skeleton(rgb, j2, np.asarray(f["bone_errors_deg"], float))
+                scale = [w / (vw or w), h / (vh or h)]
+                j2 = np.asarray(f["joints_2d"], float) * scale
+                best = f.get("image_best_joints_2d")  # image_misfit frames: what the video shows
+                drawn = draw_skeleton(
+                    rgb, j2, np.asarray(f["bone_errors_deg"], float),
+                    None if best is None else np.asarray(best, float) * scale,
+                )  # fmt: skip
                 ok, buf = cv2.imencode(
                     ".jpg", cv2.cvtColor(drawn, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 85]
                 )

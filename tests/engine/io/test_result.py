@@ -141,3 +141,20 @@ def test_misfit_frames_carry_the_candidate_the_video_fits_best(result_doc):
     assert doc["frames"][2]["image_best"] == 1
     np.testing.assert_allclose(doc["frames"][2]["image_best_joints_2d"],
                                cam.project(cands[2][1]), atol=0.01)  # fmt: skip
+
+
+def test_skeleton_drawing_adds_what_the_video_suggests_dashed(result_doc):
+    from engine.report import MISFIT_RGB, draw_skeleton
+
+    f = result_doc["frames"][3]
+    grey = np.full((240, 320, 3), 128, np.uint8)
+    j2, errs = np.asarray(f["joints_2d"]), np.asarray(f["bone_errors_deg"])
+    plain = draw_skeleton(grey, j2, errs)
+
+    def amber(img: np.ndarray) -> int:
+        return int((np.abs(img.astype(int) - MISFIT_RGB).max(-1) <= 6).sum())
+
+    assert amber(plain) == 0
+    drawn = draw_skeleton(grey, j2, errs, video_suggests=j2 + [30.0, 0.0])
+    assert amber(drawn) > 30
+    np.testing.assert_array_equal(grey, 128)  # the frame itself is left alone
