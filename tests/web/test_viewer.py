@@ -70,6 +70,7 @@ def test_scene_colours_bones_by_error_and_follows_the_slider(server, analysis):
         ref_pts = scene.handles["reference"].points
         np.testing.assert_allclose(ref_pts[0, 0], doc["frames"][8]["joints_3d"][0], atol=1e-4)
         assert scene.handles["candidates"].points.shape == (16, 2, 3)
+        assert np.ptp(scene.handles["image_best"].points, axis=-2).max() == 0  # video agrees
         scene.handles["show_candidates"].value = False
         assert not scene.handles["candidates"].visible
         assert any(k.startswith("segment_") for k in scene.handles)
@@ -106,3 +107,19 @@ def test_viewer_loads_in_chromium(server, analysis, browser):
     finally:
         scene.close()
     assert shot.stat().st_size > 5000
+
+
+def test_scene_shows_what_the_video_suggests_in_misfit_frames(server, analysis):
+    ref, doc = analysis
+    doc["frames"][8]["flags"].append("image_misfit")
+    doc["frames"][8]["image_best"] = 1
+    scene = build_scene(server, ref, doc, gui=False)
+    try:
+        scene.set_frame(8)
+        pts = scene.handles["image_best"].points
+        decoy = np.asarray(doc["frames"][8]["candidates"][1])
+        np.testing.assert_allclose(pts[12], decoy[[12, 13]], atol=1e-5)  # r_shoulder->r_elbow
+        scene.set_frame(7)
+        assert np.ptp(scene.handles["image_best"].points, axis=-2).max() == 0
+    finally:
+        scene.close()

@@ -22,6 +22,8 @@ from engine.report import ERROR_RED_DEG, error_colors
 
 REFERENCE_RGB = (110, 130, 200)
 CANDIDATE_RGB = (190, 190, 190)
+#: The candidate that fits the video best, shown where the video disagrees (image_misfit).
+IMAGE_BEST_RGB = (250, 176, 5)
 #: Vertical field of view of the initial camera; narrower than viser's 75 deg so the
 #: figure is not stretched at the edges of a tall, narrow iframe.
 CAMERA_FOV_DEG = 50.0
@@ -94,6 +96,12 @@ class ViewerScene:
                 h["candidates"].points = _segments_of(others).reshape(-1, 2, 3).astype(np.float32)
             else:  # nothing to show: a degenerate segment at the hip
                 h["candidates"].points = np.repeat(sel[:1], 2, 0)[None].astype(np.float32)
+            best = f.get("image_best")
+            if best is not None and 0 <= int(best) < len(f.get("candidates") or []):
+                pts = _segments_of(np.asarray(f["candidates"][int(best)], float))
+            else:  # the video agrees with the reported posture: nothing to show
+                pts = np.repeat(sel[:1], 2, 0)[None]
+            h["image_best"].points = pts.astype(np.float32)
             label = f"t'={f['t']}  t={f['reference_frame']}  eps={f['posture_error_deg']:.1f} deg"
             h["label"].text = label
             top = sel[16] + LABEL_LIFT  # above the performer's head, or the expert's if higher
@@ -155,7 +163,9 @@ def _legend_html() -> str:
         f"<div style='display:flex;justify-content:space-between'><span>0&deg;</span>"
         f"<span>{ERROR_RED_DEG / 2:.0f}&deg;</span><span>&ge;{ERROR_RED_DEG:.0f}&deg;</span></div>"
         "<div><span style='color:rgb(110,130,200)'>&#9632;</span> reference "
-        "<span style='color:#aaa'>&#9632;</span> other candidates</div></div>"
+        "<span style='color:#aaa'>&#9632;</span> other candidates</div>"
+        "<div><span style='color:rgb(250,176,5)'>&#9632;</span> what the video shows where it "
+        "disagrees</div></div>"
     )
 
 
@@ -203,6 +213,9 @@ def build_scene(
     h = scene.handles
     h["candidates"] = server.scene.add_line_segments(
         "/candidates", zero, CANDIDATE_RGB, thickness=3, thickness_units="screen"
+    )
+    h["image_best"] = server.scene.add_line_segments(
+        "/image_best", zero, IMAGE_BEST_RGB, thickness=5, thickness_units="screen"
     )
     h["reference"] = server.scene.add_line_segments(
         "/reference", zero, REFERENCE_RGB, thickness=6, thickness_units="screen"
