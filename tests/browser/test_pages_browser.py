@@ -92,8 +92,9 @@ def test_results_overlay_plot_and_cursor_follow_the_video(
         )
         f.pop("image_best", None)
         f.pop("image_best_joints_2d", None)
-        if t == 4:  # what the video suggests there: the posture 25 px to the right
-            f["image_best_joints_2d"] = [[u + 25.0, v] for u, v in f["joints_2d"]]
+        if t == 4:  # what the video suggests there: the right ankle 25 px to the right
+            f["image_best_joints_2d"] = [[u + 25.0 * (j == 6), v] for j, (u, v) in
+                                         enumerate(f["joints_2d"])]  # fmt: skip
     aid = server.add_done_analysis("pat", clip, result)
     ctx = browser.new_context(viewport={"width": 1280, "height": 1000})
     page = ctx.new_page()
@@ -106,6 +107,7 @@ def test_results_overlay_plot_and_cursor_follow_the_video(
     assert page.locator("#plot-svg polyline").count() >= 2
     # frame 4's dashed amber skeleton (exact #fab005; the error colours all have blue 13)
     assert page.locator("#legend-image-best").is_visible()
+    assert page.locator("#legend3d-image-best").count() == 1
     go_to_frame(page, 0)
     assert amber_pixels(page) == 0
     go_to_frame(page, 4)
@@ -123,6 +125,7 @@ def test_results_overlay_plot_and_cursor_follow_the_video(
     assert warned.count() == len({i for i, s in enumerate(result["segments"])
                                   if s["performer_start"] <= 5 and s["performer_end"] >= 3})
     counts = [int(t.split("disagrees in ")[1].split()[0]) for t in warned.all_inner_texts()]
+    assert "mostly at r_knee->r_ankle:" in " ".join(warned.all_inner_texts())
     assert sum(counts) >= 3, counts  # a boundary frame belongs to both of its segments
     page.wait_for_selector("#viewer3d:not([hidden]), #fallback3d:not([hidden])", timeout=30_000)
     page.wait_for_timeout(1500)  # let the 3D view draw

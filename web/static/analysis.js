@@ -122,7 +122,9 @@
     overlay.width = result.video.width; overlay.height = result.video.height;
     video.src = base + "/video.mp4";
     showMessages((result.summary && result.summary.messages) || []);
-    $("legend-image-best").hidden = !result.frames.some(function (f) { return f.image_best_joints_2d; });
+    const anyBest = result.frames.some(function (f) { return f.image_best_joints_2d; });
+    $("legend-image-best").hidden = !anyBest;
+    $("legend3d-image-best").hidden = !anyBest;
     buildBonePicks(); buildPlot(); buildSegments(); loadComments(); start3d();
     $("plot").setAttribute("aria-valuemax", String(n - 1));
     setFrame(0, true);
@@ -296,16 +298,39 @@
     if (Math.abs(r - 1) < 0.05) return "tempo: as the expert";
     return "tempo: " + r.toFixed(2) + "× the expert's time (" + (r > 1 ? "slower" : "faster") + ")";
   }
+  // Bones whose picture differs most between the reported posture and the one that fits the
+  // video best (bone vectors in pixels, so a shift of the whole body does not count).
+  function disagreeingBones(frames) {
+    const sum = BONES.map(function () { return 0; });
+    let k = 0;
+    frames.forEach(function (f) {
+      const g = f.image_best_joints_2d, p = f.joints_2d;
+      if (!g) return;
+      k++;
+      for (let b = 0; b < BONES.length; b++) {
+        const dx = (g[CHILD[b]][0] - g[PARENT[b]][0]) - (p[CHILD[b]][0] - p[PARENT[b]][0]);
+        const dy = (g[CHILD[b]][1] - g[PARENT[b]][1]) - (p[CHILD[b]][1] - p[PARENT[b]][1]);
+        sum[b] += Math.hypot(dx, dy);
+      }
+    });
+    if (!k) return [];
+    const px = Math.max(3, result.video.height / 80);  // what a viewer notices
+    return sum.map(function (v, b) { return [v / k, b]; }).filter(function (x) { return x[0] >= px; })
+      .sort(function (a, b) { return b[0] - a[0]; }).slice(0, 2).map(function (x) { return BONES[x[1]]; });
+  }
   function buildSegments() {
     const box = $("segment-cards");
     box.textContent = "";
     summary.segments.forEach(function (s, i) {
       // A small error where the video disagrees is not a good mark: say so on the card.
-      const misfit = result.frames.filter(function (f) {
+      const flagged = result.frames.filter(function (f) {
         return f.t >= s.performer_start && f.t <= s.performer_end && (f.flags || []).indexOf("image_misfit") >= 0;
-      }).length;
+      });
+      const misfit = flagged.length;
       const span = s.performer_end - s.performer_start + 1;
-      const warn = misfit ? coach.el("span", { class: "seg-misfit", text: "⚠ the video disagrees in " + misfit + " of " + span + " frames: look at them yourself" }) : null;
+      const where = disagreeingBones(flagged);
+      const warn = misfit ? coach.el("span", { class: "seg-misfit", text: "⚠ the video disagrees in " + misfit + " of " + span +
+        " frames" + (where.length ? ", mostly at " + where.join(", ") : "") + ": look at them yourself" }) : null;
       const card = coach.el("button", { type: "button", class: "seg-card", "data-index": i,
         "aria-label": s.name + ": mean error " + s.mean_error_deg.toFixed(0) + " degrees" + (misfit ? ", but the video disagrees in " + misfit + " frames" : "") + "; go to its first frame" }, [
         coach.el("h3", { text: s.name }),
