@@ -156,6 +156,9 @@ class SegmentPublic(BaseModel):
     #: Frames of the segment whose reported posture the video does not confirm (flag
     #: ``image_misfit``): the errors there may be underestimated.
     misfit_frames: int = 0
+    #: Where those frames disagree most: up to two bones whose picture differs most between
+    #: the reported posture and the candidate that fits the video best.
+    misfit_bones: list[str] = []
 
 
 class SegmentsPublic(BaseModel):

@@ -24,6 +24,11 @@ RESULT = {
     ],
     "timing_s": {"total": 12.5},
 }  # fmt: skip
+# frame 5 also says what the video shows there: the right ankle 20 px to the right
+_J2 = [[160.0 + 10 * j, 100.0 + 5 * j] for j in range(17)]
+RESULT["frames"][5].update(
+    joints_2d=_J2, image_best_joints_2d=[[u + 20.0 * (j == 6), v] for j, (u, v) in enumerate(_J2)]
+)
 
 
 def write_atomic(path: Path, data: dict) -> None:
@@ -191,6 +196,7 @@ def test_progress_is_reflected_and_result_is_409_until_done(client, club_ref, qu
     assert seg["worst_bone"] == "l_elbow->l_wrist" and seg["worst_bone_error_deg"] == 30.0
     assert seg["tempo_ratio"] == pytest.approx((70 / 30) / (240 / 120))
     assert seg["misfit_frames"] == 2  # frames whose posture the video does not confirm
+    assert seg["misfit_bones"] == ["r_knee->r_ankle"]  # frame 5's ankle is elsewhere
     status(work, "running", 0.1)  # a final state in the database is never undone
     assert client.get(url, headers=h).json()["status"] == "done"
 

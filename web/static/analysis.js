@@ -298,37 +298,13 @@
     if (Math.abs(r - 1) < 0.05) return "tempo: as the expert";
     return "tempo: " + r.toFixed(2) + "× the expert's time (" + (r > 1 ? "slower" : "faster") + ")";
   }
-  // Bones whose picture differs most between the reported posture and the one that fits the
-  // video best (bone vectors in pixels, so a shift of the whole body does not count).
-  function disagreeingBones(frames) {
-    const sum = BONES.map(function () { return 0; });
-    let k = 0;
-    frames.forEach(function (f) {
-      const g = f.image_best_joints_2d, p = f.joints_2d;
-      if (!g) return;
-      k++;
-      for (let b = 0; b < BONES.length; b++) {
-        const dx = (g[CHILD[b]][0] - g[PARENT[b]][0]) - (p[CHILD[b]][0] - p[PARENT[b]][0]);
-        const dy = (g[CHILD[b]][1] - g[PARENT[b]][1]) - (p[CHILD[b]][1] - p[PARENT[b]][1]);
-        sum[b] += Math.hypot(dx, dy);
-      }
-    });
-    if (!k) return [];
-    const px = Math.max(3, result.video.height / 80);  // what a viewer notices
-    return sum.map(function (v, b) { return [v / k, b]; }).filter(function (x) { return x[0] >= px; })
-      .sort(function (a, b) { return b[0] - a[0]; }).slice(0, 2).map(function (x) { return BONES[x[1]]; });
-  }
   function buildSegments() {
     const box = $("segment-cards");
     box.textContent = "";
     summary.segments.forEach(function (s, i) {
       // A small error where the video disagrees is not a good mark: say so on the card.
-      const flagged = result.frames.filter(function (f) {
-        return f.t >= s.performer_start && f.t <= s.performer_end && (f.flags || []).indexOf("image_misfit") >= 0;
-      });
-      const misfit = flagged.length;
+      const misfit = s.misfit_frames || 0, where = s.misfit_bones || [];
       const span = s.performer_end - s.performer_start + 1;
-      const where = disagreeingBones(flagged);
       const warn = misfit ? coach.el("span", { class: "seg-misfit", text: "⚠ the video disagrees in " + misfit + " of " + span +
         " frames" + (where.length ? ", mostly at " + where.join(", ") : "") + ": look at them yourself" }) : null;
       const card = coach.el("button", { type: "button", class: "seg-card", "data-index": i,

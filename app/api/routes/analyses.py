@@ -7,6 +7,7 @@ from collections.abc import AsyncIterator
 from datetime import datetime
 from typing import Annotated, Any
 
+import numpy as np
 from fastapi import APIRouter, File, Form, Header, Query, Request, Response, UploadFile
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import FileResponse, StreamingResponse
@@ -35,6 +36,7 @@ from app.schemas import (
     SegmentPublic,
     SegmentsPublic,
 )
+from engine.body.skeleton import BONE_CHILD, BONE_PARENT
 from engine.errors import InvalidInput
 from engine.report import ONE_CAMERA_NOTE
 
@@ -239,12 +241,32 @@ def read_result(analysis_id: str, club: CurrentClub, session: SessionDep, notifi
     return FileResponse(analysis.result_path, media_type="application/json")
 
 
+def misfit_bones(frames: list[dict[str, Any]], height: float) -> list[str]:
+    """Up to two bones whose picture differs most between the reported posture and the one
+    that fits the video best, over ``image_misfit`` frames carrying ``image_best_joints_2d``.
+
+    Bone vectors are compared in pixels, so a shift of the whole body does not count; a bone
+    must differ by what a viewer notices (``height`` / 80, at least 3 px).
+    """
+    pairs = [(f["joints_2d"], f["image_best_joints_2d"]) for f in frames
+             if f.get("image_best_joints_2d") and f.get("joints_2d")]  # fmt: skip
+    if not pairs:
+        return []
+    p, g = (np.asarray(x, float) for x in zip(*pairs, strict=True))  # (k, 17, 2) each
+    diff = (g[:, BONE_CHILD] - g[:, BONE_PARENT]) - (p[:, BONE_CHILD] - p[:, BONE_PARENT])
+    d = np.linalg.norm(diff, axis=-1).mean(0)  # (16,)
+    px = max(3.0, height / 80)
+    return [BONE_NAMES[b] for b in np.argsort(-d)[:2] if d[b] >= px]
+
+
 def summarise_segments(result: dict[str, Any]) -> list[SegmentPublic]:
     out = []
-    misfit = {
-        f["t"] for f in result.get("frames") or [] if "image_misfit" in (f.get("flags") or ())
-    }
+    misfit = [
+        f for f in result.get("frames") or [] if "image_misfit" in (f.get("flags") or ())
+    ]
+    height = float((result.get("video") or {}).get("height") or 0)
     for i, seg in enumerate(result.get("segments") or []):
+        inside = [f for f in misfit if seg["performer_start"] <= f["t"] <= seg["performer_end"]]
         bones = [float(e) for e in seg.get("bone_mean_errors_deg") or []]
         named = dict(zip(BONE_NAMES, bones, strict=False))
         worst = max(named, key=named.__getitem__) if named else None
@@ -267,9 +289,8 @@ def summarise_segments(result: dict[str, Any]) -> list[SegmentPublic]:
                 worst_bone=worst,
                 worst_bone_error_deg=named[worst] if worst else None,
                 bone_mean_errors_deg=named,
-                misfit_frames=sum(
-                    seg["performer_start"] <= t <= seg["performer_end"] for t in misfit
-                ),
+                misfit_frames=len(inside),
+                misfit_bones=misfit_bones(inside, height),
             )
         )
     return out
