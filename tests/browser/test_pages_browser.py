@@ -175,6 +175,8 @@ def test_coach_review_comments_persist_and_exports_parse(server, browser, clip, 
     texts = page.locator("#comments li.comment").all_inner_texts()
     assert any("frame 2" in t and "left arm" in t for t in texts), texts
     assert page.locator("#segment-table tbody tr").count() == len(clip_result["segments"])
+    cells = page.locator("#segment-table tbody tr").first.locator("td").all_inner_texts()
+    assert len(cells) == 6 and (cells[-1] == "–" or " frames" in cells[-1]), cells
     page.screenshot(path=str(shots / "review.png"), full_page=True)
 
     with page.expect_download() as d:

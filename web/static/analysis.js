@@ -331,6 +331,7 @@
           coach.el("td", { text: s.tempo_ratio ? s.tempo_ratio.toFixed(2) + "×" : "–" }),
           coach.el("td", { text: s.mean_error_deg.toFixed(1) + "°" }),
           coach.el("td", { text: s.worst_bones.map(function (wb) { return wb[0] + " " + wb[1].toFixed(0) + "°"; }).join(", ") }),
+          coach.el("td", { text: s.misfit_frames ? s.misfit_frames + " frames" + ((s.misfit_bones || []).length ? " (" + s.misfit_bones.join(", ") + ")" : "") : "–" }),
         ]);
         tb.append(tr);
       });
