@@ -149,7 +149,7 @@ def _error_plot_png(result: dict[str, Any]) -> str:
                 ha="center", va="bottom", fontsize=8)  # fmt: skip
     misfit = [i for i, f in enumerate(result["frames"]) if "image_misfit" in f.get("flags", ())]
     for k, i in enumerate(misfit):  # frames the video does not confirm: errors may be too small
-        ax.axvspan(t[i] - 0.5, t[i] + 0.5, color="#fab005", alpha=0.35, lw=0,
+        ax.axvspan(t[i] - 0.5, t[i] + 0.5, color=np.divide(MISFIT_RGB, 255), alpha=0.35, lw=0,
                    label="video disagrees (image_misfit)" if k == 0 else None)  # fmt: skip
     ax.plot(t, eps, color="k", lw=1.2, label="posture error eps_t'")
     if "score_deg" in result["frames"][0]:

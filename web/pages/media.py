@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from engine.body.skeleton import BONE_CHILD, BONE_NAMES, BONE_PARENT, JOINTS
+from engine.report import MISFIT_RGB
 
 #: Longest side of the browser rendition; phones do not need more and encoding stays quick.
 MAX_RENDITION_HEIGHT = 720
@@ -384,7 +385,7 @@ def error_plot_svg(result: dict[str, Any], *, width: int = 720, height: int = 18
         if "image_misfit" in (f.get("flags") or ()):
             parts.append(
                 f'<rect class="misfit-mark" x="{x(i) - step / 2:.1f}" y="6" width="{step:.1f}" '
-                f'height="{height - 26}" fill="#fab005" fill-opacity="0.35"/>'
+                f'height="{height - 26}" fill="rgb{MISFIT_RGB}" fill-opacity="0.35"/>'
             )
     for s in result.get("segments") or []:
         parts.append(

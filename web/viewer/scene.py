@@ -18,12 +18,12 @@ import numpy as np
 import viser
 
 from engine.body.skeleton import BONE_CHILD, BONE_PARENT
-from engine.report import ERROR_RED_DEG, error_colors
+from engine.report import ERROR_RED_DEG, MISFIT_RGB, error_colors
 
 REFERENCE_RGB = (110, 130, 200)
 CANDIDATE_RGB = (190, 190, 190)
 #: The candidate that fits the video best, shown where the video disagrees (image_misfit).
-IMAGE_BEST_RGB = (250, 176, 5)
+IMAGE_BEST_RGB = MISFIT_RGB
 #: Vertical field of view of the initial camera; narrower than viser's 75 deg so the
 #: figure is not stretched at the edges of a tall, narrow iframe.
 CAMERA_FOV_DEG = 50.0
@@ -164,7 +164,7 @@ def _legend_html() -> str:
         f"<span>{ERROR_RED_DEG / 2:.0f}&deg;</span><span>&ge;{ERROR_RED_DEG:.0f}&deg;</span></div>"
         "<div><span style='color:rgb(110,130,200)'>&#9632;</span> reference "
         "<span style='color:#aaa'>&#9632;</span> other candidates</div>"
-        "<div><span style='color:rgb(250,176,5)'>&#9632;</span> what the video shows where it "
+        f"<div><span style='color:rgb{MISFIT_RGB}'>&#9632;</span> what the video shows where it "
         "disagrees</div></div>"
     )
 

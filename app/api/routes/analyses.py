@@ -36,22 +36,13 @@ from app.schemas import (
     SegmentPublic,
     SegmentsPublic,
 )
-from engine.body.skeleton import BONE_CHILD, BONE_PARENT
+from engine.body.skeleton import BONE_CHILD, BONE_NAMES, BONE_PARENT
 from engine.errors import InvalidInput
 from engine.report import ONE_CAMERA_NOTE
 
 log = logging.getLogger("app.analyses")
 
 router = APIRouter(prefix="/analyses", tags=["analyses"], responses=errors(401, 429))
-
-#: DESIGN.md's 16 bones, named parent->child, in result order.
-BONE_NAMES = (
-    "hip->l_hip", "l_hip->l_knee", "l_knee->l_ankle", "hip->r_hip", "r_hip->r_knee",
-    "r_knee->r_ankle", "hip->lower_chest", "lower_chest->upper_chest",
-    "upper_chest->l_shoulder", "l_shoulder->l_elbow", "l_elbow->l_wrist",
-    "upper_chest->r_shoulder", "r_shoulder->r_elbow", "r_elbow->r_wrist", "upper_chest->neck",
-    "neck->head_top",
-)  # fmt: skip
 
 IdempotencyKey = Annotated[
     str | None,
