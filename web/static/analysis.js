@@ -314,7 +314,8 @@
         coach.el("span", { class: "muted", text: "frames " + s.performer_start + "–" + s.performer_end }),
         coach.el("span", { text: tempoText(s.tempo_ratio) }),
         coach.el("ul", {}, s.worst_bones.map(function (wb) { return coach.el("li", { text: wb[0] + ": " + wb[1].toFixed(0) + "°" }); })),
-      ].concat(warn ? [warn] : []));
+        warn,  // null (skipped) where the video agrees
+      ]);
       card.style.borderLeftColor = misfit ? MISFIT : coach.errorColor(s.mean_error_deg);
       card.addEventListener("click", function () { video.pause(); seek(s.performer_start); });
       box.append(card);
