@@ -124,6 +124,9 @@ def test_results_overlay_plot_and_cursor_follow_the_video(
     warned = page.locator(".seg-card .seg-misfit")
     assert warned.count() == len({i for i, s in enumerate(result["segments"])
                                   if s["performer_start"] <= 5 and s["performer_end"] >= 3})
+    # its card opens at the first frame the video disagrees with
+    page.locator(".seg-card", has=page.locator(".seg-misfit")).first.click()
+    page.wait_for_function("document.getElementById('analysis').dataset.frame === '3'")
     counts = [int(t.split("disagrees in ")[1].split()[0]) for t in warned.all_inner_texts()]
     assert "mostly at r_knee->r_ankle:" in " ".join(warned.all_inner_texts())
     assert sum(counts) >= 3, counts  # a boundary frame belongs to both of its segments

@@ -308,7 +308,7 @@
       const warn = misfit ? coach.el("span", { class: "seg-misfit", text: "⚠ the video disagrees in " + misfit + " of " + span +
         " frames" + (where.length ? ", mostly at " + where.join(", ") : "") + ": look at them yourself" }) : null;
       const card = coach.el("button", { type: "button", class: "seg-card", "data-index": i,
-        "aria-label": s.name + ": mean error " + s.mean_error_deg.toFixed(0) + " degrees" + (misfit ? ", but the video disagrees in " + misfit + " frames" : "") + "; go to its first frame" }, [
+        "aria-label": s.name + ": mean error " + s.mean_error_deg.toFixed(0) + " degrees" + (misfit ? ", but the video disagrees in " + misfit + " frames; go to the first of them" : "; go to its first frame") }, [
         coach.el("h3", { text: s.name }),
         coach.el("span", { class: "score", text: (s.score != null ? s.score : s.mean_error_deg).toFixed(0) + "°" }),
         coach.el("span", { class: "muted", text: "frames " + s.performer_start + "–" + s.performer_end }),
@@ -317,7 +317,11 @@
         warn,  // null (skipped) where the video agrees
       ]);
       card.style.borderLeftColor = misfit ? MISFIT : coach.errorColor(s.mean_error_deg);
-      card.addEventListener("click", function () { video.pause(); seek(s.performer_start); });
+      // a segment where the video disagrees opens at its first such frame, where there is most to see
+      const firstMisfit = misfit ? result.frames.findIndex(function (f) {
+        return f.t >= s.performer_start && f.t <= s.performer_end && (f.flags || []).indexOf("image_misfit") >= 0;
+      }) : -1;
+      card.addEventListener("click", function () { video.pause(); seek(firstMisfit >= 0 ? firstMisfit : s.performer_start); });
       box.append(card);
     });
     const pin = $("comment-pin");
