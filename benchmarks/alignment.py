@@ -55,7 +55,7 @@ def main() -> None:
     cam, _ = calibrate(ref.motion.joints[c0], ref.shape, fg.silhouettes[0], fg.edges[0])
     s = AlignmentSettings()
     posed = rotate_about_hip(joints, rotation_samples(s.yaw_deg, s.tilt_deg))
-    targets = make_targets(fg.silhouettes, fg.skin, s.compare_height)
+    targets = make_targets(fg.silhouettes, fg.skin if s.skin_edges else None, s.compare_height)
     n_v, n_r = len(targets), len(joints)
     t0 = time.perf_counter()
     cost, _ = cost_entries(posed, targets, ref.shape, half_camera(cam, s.compare_height),

@@ -166,11 +166,12 @@ def run_stages_0_2_full(
     timing["calibration"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     results = []
+    passes = len(cameras) + int(alignment.realign and calibration.refine_frames > 0)
     for i, cam in enumerate(cameras):
         shape: BodyShape = reference.shape
         if align_with_fitted_shape and calibration.fit_width:
             shape, _ = fit_body_shape(joints[c0], reference.shape, cam, fg.silhouettes[k])
-        progress = None if on_progress is None else _share(on_progress, i, len(cameras))
+        progress = None if on_progress is None else _share(on_progress, i, passes)
         aligned = align(joints, shape, cam, fg.silhouettes, fg.skin, alignment, start=c0,
                         on_progress=progress)  # fmt: skip
         results.append((aligned.E_C, i, cam, aligned))
@@ -185,6 +186,12 @@ def run_stages_0_2_full(
     if calibration.fit_width:  # the performer's widths, for the final camera
         shape, factors = fit_body_shape(joints[c0], reference.shape, camera, fg.silhouettes[k])
     timing["calibration"] += time.perf_counter() - t0
+    if passes > len(cameras):  # AlignmentSettings.realign: C again with the polished camera
+        t0 = time.perf_counter()
+        progress = None if on_progress is None else _share(on_progress, passes - 1, passes)
+        result = align(joints, shape, camera, fg.silhouettes, fg.skin, alignment, start=c0,
+                       on_progress=progress)  # fmt: skip
+        timing["alignment"] += time.perf_counter() - t0
     views = {round(float(np.degrees(r[2].azimuth)), 6): float(r[0]) for r in results}
     return Stages02(fg, camera, shape, factors, result, timing, views)
 

@@ -135,32 +135,51 @@ def test_step_cost_prefers_the_mean_slope():
         dp_path(np.zeros((2, 3)), window=2, step_cost=np.zeros(2))
 
 
-def test_align_recovers_a_rendered_warp():
-    """Identity case (STYLE.md): a video rendered from the reference with a known warp."""
+def _rendered_warp():
+    """A synthetic reference (121 frames) and 31 silhouettes of it, 160x120, warped in time."""
     from engine.body.kinematics import forward_kinematics, rotation_about_axis
     from engine.body.shapes import BodyShape
+    from engine.body.skeleton import PART_INDEX
     from engine.render import capsules
     from engine.render.camera import Camera
-    from engine.stages.alignment import AlignmentSettings, align
 
     shape = BodyShape.default(1.75)
     n_r = 121
     ph = np.linspace(0, 2.5 * np.pi, n_r)
     rots = np.broadcast_to(np.eye(3), (n_r, 12, 3, 3)).copy()
     # swing the arms and one leg: parts 7.. are limbs (upper arms about z, a leg about x)
-    from engine.body.skeleton import PART_INDEX
-
     for name, axis, amp in (("l_upper_arm", [0, 0, 1], 1.2), ("r_upper_arm", [0, 0, 1], -1.0),
                             ("l_upper_leg", [1, 0, 0], 0.6)):  # fmt: skip
         rots[:, PART_INDEX[name]] = rotation_about_axis(np.array(axis, float), amp * np.sin(ph))
     ref = np.stack([forward_kinematics(shape.offsets, np.array([0, 1.0, 0]), r) for r in rots])
     cam = Camera(scale=60.0, theta_z=0.0, cx=80, cy=110, width=160, height=120)
     true_c = np.round(np.linspace(0, 1, 31) ** 1.3 * (n_r - 1)).astype(int)
-    sil = capsules.silhouettes(ref[true_c], shape, cam)
-    res = align(ref, shape, cam, sil, settings=AlignmentSettings(compare_height=120))
-    assert res.C[0] == 0 and res.C[-1] == n_r - 1
+    return ref, shape, cam, capsules.silhouettes(ref[true_c], shape, cam), true_c
+
+
+def test_align_recovers_a_rendered_warp():
+    from engine.stages.alignment import AlignmentSettings, align
+
+    ref, shape, cam, sil, true_c = _rendered_warp()
+    res = align(ref, shape, cam, sil)
+    assert res.C[0] == 0 and res.C[-1] == len(ref) - 1
     assert np.all(np.diff(res.C) >= 0)
     assert np.mean(np.abs(res.C - true_c)) < 2.0
+    # the default comparison height (240) is capped at the image's 120 rows
+    same = align(ref, shape, cam, sil, settings=AlignmentSettings(compare_height=120))
+    assert np.array_equal(res.cost, same.cost)
+
+
+def test_skin_contours_join_the_edges_only_when_asked():
+    from engine.stages.alignment import AlignmentSettings, align
+
+    ref, shape, cam, sil, _ = _rendered_warp()
+    skin = np.zeros_like(sil)
+    skin[:, 40:60, 70:90] = sil[:, 40:60, 70:90]  # a "face" inside the body
+    plain = align(ref, shape, cam, sil).cost
+    assert np.array_equal(align(ref, shape, cam, sil, skin).cost, plain)
+    with_skin = align(ref, shape, cam, sil, skin, AlignmentSettings(skin_edges=True)).cost
+    assert not np.array_equal(with_skin, plain)
 
 
 from tests.conftest import BENCH_CASES  # noqa: E402
@@ -173,6 +192,7 @@ def test_run_stages_0_2_on_a_short_clip():
     from engine.io.bvh import load_reference
     from engine.io.video import read_video
     from engine.stages import Stages02, run_stages_0_2, run_stages_0_2_full
+    from engine.stages.alignment import align
 
     ref = load_reference(P1 / "reference.bvh")
     video = read_video(P1 / "video.mp4", max_frames=40)
@@ -183,6 +203,19 @@ def test_run_stages_0_2_on_a_short_clip():
     assert set(st.width_factors) == {"torso", "head", "arms", "legs"}
     assert st.shape.radii.shape == ref.shape.radii.shape
     assert set(st.timing_s) == {"foreground", "calibration", "alignment"}
+    # AlignmentSettings.realign: the correspondence is stage 2 run with the final camera and
+    # the fitted body, not the first pass's calibration-frame camera and reference body
+    c0 = ref.motion.first_motion_frame
+    fg = st.foreground
+    again = align(ref.motion.joints, st.shape, st.camera, fg.silhouettes, fg.skin, start=c0)
+    assert np.array_equal(st.alignment.cost, again.cost)
+    assert np.array_equal(st.alignment.C, again.C)
+    unfitted = align(ref.motion.joints, ref.shape, st.camera, fg.silhouettes, fg.skin, start=c0)
+    assert not np.array_equal(unfitted.cost, again.cost)  # the check above can tell
+    seen = []
+    run_stages_0_2_full(ref, video, on_progress=lambda stage, f: seen.append((stage, f)))
+    steps = [f for stage, f in seen if stage == "alignment"]
+    assert steps[-1] == pytest.approx(1.0) and np.all(np.diff(steps) >= -1e-12)
     fg, cam, res, timing = run_stages_0_2(ref, video)  # the old tuple form still works
     # (GrabCut seeds its own k-means, so two runs may differ by a frame or two)
     assert res.C.shape == st.alignment.C.shape and set(timing) == set(st.timing_s)
