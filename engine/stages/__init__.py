@@ -106,7 +106,9 @@ def run_stages_0_2_full(
 
     With ``calibration.check_mirror`` stage 2 runs for the calibrated view and for the best
     view facing the other way, and the one with the lower mean cost E_C is kept (one frame
-    hardly tells front from back; the whole motion does).
+    hardly tells front from back; the whole motion does). The camera is then polished on
+    frames spread over the video and, with ``alignment.realign``, stage 2 runs once more
+    with it and the performer's fitted body.
 
     Parameters
     ----------
@@ -116,9 +118,11 @@ def run_stages_0_2_full(
         ``video.frames`` (T', H, W, 3) RGB uint8.
     foreground, calibration, alignment : settings of each stage
     align_with_fitted_shape : bool
-        Compare stage 2's renders with the fitted body instead of the reference's. Off:
-        measured slightly worse on the public cases (0.87 -> 1.12 and 1.90 -> 2.07 video
-        frames), because the fit absorbs foreground errors of one frame.
+        Compare stage 2's first pass with a body fitted for the calibration-frame camera
+        instead of the reference's. Off: measured slightly worse on the public cases (0.87 ->
+        1.12 and 1.90 -> 2.07 video frames), because the fit absorbs foreground errors of one
+        frame. The second pass (``alignment.realign``) uses the body fitted for the polished
+        camera.
     on_progress : callable(stage, fraction), optional
 
     Returns
