@@ -40,9 +40,12 @@ def amber_pixels(page) -> int:
 
 
 def most_colourful_frame(result: dict) -> int:
-    """The frame whose worst bone is worst (red) while another bone is near zero (green)."""
+    """A frame with a red bone (>= 36 deg on common.js's ramp, red at 45) and a green one
+    (<= 13 deg), as red as possible: what ``canvas_colours`` counts."""
     e = np.array([f["bone_errors_deg"] for f in result["frames"]])
-    return int(np.argmax(e.max(1) - e.min(1)))
+    both = (e.max(1) >= 36.0) & (e.min(1) <= 13.0)
+    assert both.any(), "the clip's analysis has no frame with both a red and a green bone"
+    return int(np.argmax(np.where(both, e.max(1), -np.inf)))
 
 
 def go_to_frame(page, frame: int) -> None:
