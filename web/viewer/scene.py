@@ -40,6 +40,11 @@ def _segments_of(joints: np.ndarray) -> np.ndarray:
     return np.stack([joints[..., BONE_PARENT, :], joints[..., BONE_CHILD, :]], -2)
 
 
+def _hidden_at(point: np.ndarray) -> np.ndarray:
+    """One zero-length segment at ``point`` (3,): how a line handle shows nothing, (1, 2, 3)."""
+    return np.repeat(np.asarray(point, np.float32)[None], 2, 0)[None]
+
+
 def _rgb_pairs(rgb01: np.ndarray) -> np.ndarray:
     """Per-bone colours (16, 3) in [0, 1] -> (16, 2, 3) uint8 for line segments."""
     c = np.clip(np.asarray(rgb01) * 255, 0, 255).astype(np.uint8)
@@ -94,13 +99,13 @@ class ViewerScene:
             h["performer"].colors = _rgb_pairs(error_colors(np.asarray(f["bone_errors_deg"])))
             if len(others):
                 h["candidates"].points = _segments_of(others).reshape(-1, 2, 3).astype(np.float32)
-            else:  # nothing to show: a degenerate segment at the hip
-                h["candidates"].points = np.repeat(sel[:1], 2, 0)[None].astype(np.float32)
+            else:
+                h["candidates"].points = _hidden_at(sel[0])
             best = f.get("image_best")
             if best is not None and 0 <= int(best) < len(f.get("candidates") or []):
                 pts = _segments_of(np.asarray(f["candidates"][int(best)], float))
             else:  # the video agrees with the reported posture: nothing to show
-                pts = np.repeat(sel[:1], 2, 0)[None]
+                pts = _hidden_at(sel[0])
             h["image_best"].points = pts.astype(np.float32)
             label = f"t'={f['t']}  t={f['reference_frame']}  eps={f['posture_error_deg']:.1f} deg"
             h["label"].text = label
