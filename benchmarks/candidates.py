@@ -219,7 +219,8 @@ def end_to_end(args: argparse.Namespace, settings: CandidateSettings) -> None:
     segs = _reference_segments(ref, case / "reference.bvh")
     sel = select_and_refine(
         cands, ref.motion.joints, segs, C0.astype(float), settings=sel_settings,
-        fps_ratio=truth["reference_fps"] / truth["fps"], candidate_flags=flags,
+        fps_ratio=truth["reference_fps"] / truth["fps"], video_fps=truth["fps"],
+        candidate_flags=flags,
         candidate_d_s=None if args.no_image_cost else d_s,
     )  # fmt: skip
     gt = np.array([f["joints_3d"] for f in truth["frames"]], float)

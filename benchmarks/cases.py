@@ -9,7 +9,7 @@ of ``coach serve`` is a seventh case. The last three columns judge the ``image_m
 the fraction of frames flagged and the true posture error of the flagged and the other frames.
 
     python benchmarks/cases.py [--set '{"foreground": {"min_free_fraction": 0.3}}'] \
-        [--cache /tmp/coach-cases] [--jobs 2] [--only syn_64_24]
+        [--cache /tmp/coach-cases] [--jobs 2] [--only syn_64_24] [--save /tmp/results]
 """
 
 from __future__ import annotations
@@ -60,13 +60,15 @@ def misfit_figures(truth: dict, result: dict) -> dict:
     }
 
 
-def score_case(case: Path, settings: dict) -> dict:
-    """``analyze`` then ``../shared/bench/score.py``'s figures."""
+def score_case(case: Path, settings: dict, save: Path | None = None) -> dict:
+    """``analyze`` then ``../shared/bench/score.py``'s figures; the result kept in ``save``."""
     from half_rate import load_scorer
 
     from engine.pipeline import analyze
 
     result = analyze(case / "reference.bvh", case / "video.mp4", settings)
+    if save is not None:
+        (save / f"{case.name}.json").write_text(json.dumps(result))
     truth = json.loads((case / "truth.json").read_text())
     public = next((SHARED / "bench" / "cases").iterdir())  # any case finds the scorer
     return {**load_scorer(public).score(truth, result), **misfit_figures(truth, result)}
@@ -78,6 +80,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cache", type=Path, default=Path("/tmp/coach-cases"))
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--only", default="", help="only the cases whose name contains this")
+    ap.add_argument("--save", type=Path, help="write each case's result.json into this folder")
     args = ap.parse_args(argv)
     settings = json.loads(args.set)
     args.cache.mkdir(parents=True, exist_ok=True)
@@ -86,7 +89,10 @@ def main(argv: list[str] | None = None) -> int:
     cases.append(synthetic_case(DEMO[0], DEMO[1], args.cache, DEMO[2]))
     cases = [c for c in cases if args.only in c.name]
     with ProcessPoolExecutor(args.jobs) as pool:
-        scores = list(pool.map(score_case, cases, [settings] * len(cases)))
+        if args.save is not None:
+            args.save.mkdir(parents=True, exist_ok=True)
+        n = len(cases)
+        scores = list(pool.map(score_case, cases, [settings] * n, [args.save] * n))
     keys = (*KEYS, ("misfit", "misfit_fraction"), ("err|misfit", "true_err_misfit_deg"),
             ("err|ok", "true_err_ok_deg"))  # fmt: skip
     print(f"{'case':24s}" + "".join(f"{k:>11s}" for k, _ in keys))

@@ -342,7 +342,8 @@ def select(
     selection = select_and_refine(
         cands, prepared.reference_joints, prepared.segments, prepared.C.astype(float),
         settings=sel_settings, fps_ratio=prepared.reference_fps / prepared.video["fps"],
-        candidate_flags=flags, candidate_d_s=d_s, on_progress=on_progress,
+        video_fps=prepared.video["fps"], candidate_flags=flags, candidate_d_s=d_s,
+        on_progress=on_progress,
     )  # fmt: skip
     selection = flag_image_misfit(selection, d_s, sel_settings.misfit_margin)
     timing = dict(prepared.timing_s)

@@ -10,7 +10,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from engine.errors import InvalidInput
-from engine.stages.selection import SelectionSettings, refine_segment, select_and_refine
+from engine.stages.selection import (
+    SelectionSettings,
+    owned_frames,
+    refine_segment,
+    select_and_refine,
+    smooth_errors,
+)
 from engine.types import Segments
 
 REF_SEGMENTS = Segments((0, 40, 80), 120, ("up", "forward", "down"))
@@ -206,6 +212,31 @@ def test_validation_names_the_parameter():
             np.zeros(5),
             settings=SelectionSettings(boundary_joints=("x",)),
         )
+    with pytest.raises(InvalidInput, match="video_fps"):
+        select_and_refine(cands, ref, REF_SEGMENTS, np.zeros(5), video_fps=0)
+    for bad in (-0.1, float("nan")):
+        with pytest.raises(InvalidInput, match="error_smoothing_s"):
+            select_and_refine(
+                cands, ref, REF_SEGMENTS, np.zeros(5),
+                settings=SelectionSettings(error_smoothing_s=bad),
+            )  # fmt: skip
+
+
+def test_error_smoothing_calms_flicker_but_keeps_the_step_at_a_boundary():
+    """Segment 1 (frames 0-19) is right, segment 2 (20-39) wrong by 0.3 rad with +-0.1 of
+    frame-to-frame flicker: the flicker shrinks, nothing leaks across the boundary, and a
+    constant error stays the same up to the segments' ends."""
+    err = np.zeros((40, 16))
+    err[20:] = 0.3 + 0.1 * (-1.0) ** np.arange(20)[:, None]
+    spans = owned_frames([(0, 20), (20, 39)])
+    assert spans == [(0, 19), (20, 39)]
+    out = smooth_errors(err, spans, sigma_frames=1.5)
+    assert np.all(out[:20] == 0.0)  # frame 20 belongs to segment 2
+    assert np.abs(out[20:] - 0.3).max() < 0.03
+    assert out[20:].mean() == pytest.approx(0.3, abs=0.01)
+    flat = np.full((40, 16), 0.2)
+    assert smooth_errors(flat, spans, 3.0) == pytest.approx(flat)
+    assert smooth_errors(err, spans, 0.0) is err
 
 
 def _reference_and_truth(leg_peak_deg: float = 30.0):
