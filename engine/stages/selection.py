@@ -103,7 +103,9 @@ class SelectionSettings:
         test with stage 2's uniform-speed C needs <= ~2). 0 gives the thesis' DP.
     error_smoothing_s : float
         Std, seconds, of the Gaussian that smooths each bone's error over time within each
-        performer segment (beyond the thesis; 0 disables it). A performer's deviation from
+        performer segment (0 disables it). The thesis asks for a small rate of change of
+        eps_t' within a segment (2.1.3 item 6, 2.1.6 D) through d_s in the DP (eq. 4.24); this
+        also smooths the reported errors themselves. A performer's deviation from
         the reference persists for tenths of a second (the public cases' truth: lag-1
         autocorrelation of eps_t' 0.99), while the selected candidates flicker between
         neighbouring solutions (ours 0.91 on P1, 0.73 on P2). Only the errors are smoothed;
@@ -532,8 +534,9 @@ def smooth_errors(
 ) -> np.ndarray:
     """Each bone's error (T', 16) smoothed over time by a Gaussian of std ``sigma_frames``.
 
-    Within each segment's own frames ``owned`` (:func:`owned_frames`) only: thesis 2.1.6 D,
-    errors change slowly inside a segment and may change at its boundaries. Near a
+    Within each segment's own frames ``owned`` (:func:`owned_frames`) only: thesis 2.1.3
+    item 6 and 2.1.6 D, the motion is smooth within a segment so its posture errors change
+    slowly there, and they may change at its boundaries. Near a
     segment's ends the kernel is cut there and renormalised, so an end frame's error is
     neither pulled towards zero nor counted more than once.
     """
