@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from tests.browser.conftest import COACH, sign_in
+from web.pages import media
 
 pytestmark = pytest.mark.browser
 
@@ -108,6 +109,13 @@ def test_results_overlay_plot_and_cursor_follow_the_video(
     page.locator("#stage-box").screenshot(path=str(shots / "overlay.png"))
     assert red > 10 and green > 10, (red, green)
     assert page.locator("#plot-svg polyline").count() >= 2
+    # the axis fits the plotted curves, eps_t' and the two bones worst on average, with the
+    # printable plot's heights
+    labels = [t for t in page.locator("#plot-svg text").all_text_contents() if t.endswith("°")]
+    bones = np.array([f["bone_errors_deg"] for f in result["frames"]])
+    shown = bones[:, np.argsort(-bones.mean(0), kind="stable")[:2]]
+    most = max(shown.max(), max(f["posture_error_deg"] for f in result["frames"]))
+    assert max(int(t[:-1]) for t in labels) == media.plot_top(most), (labels, most)
     # frame 4's dashed amber skeleton (exact #fab005; the error colours all have blue 13)
     assert page.locator("#legend-image-best").is_visible()
     assert page.locator("#legend3d-image-best").count() == 1

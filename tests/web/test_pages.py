@@ -265,6 +265,20 @@ def test_printable_plot_shades_the_frames_the_video_does_not_confirm():
     assert media.error_plot_svg(result).count('class="misfit-mark"') == 2
 
 
+def test_printable_plot_axis_fits_the_errors():
+    """Small errors get a small axis (which frames stand out stays visible), large ones fit."""
+    assert [media.plot_top(m) for m in (0.0, 1.5, 3.7, 7.0, 15.0, 90.0, 500.0)] == [
+        4, 4, 8, 8, 20, 120, 180,
+    ]  # fmt: skip
+    result = fake_result()
+    for f in result["frames"]:
+        f["posture_error_deg"] = 1.0
+    svg = media.error_plot_svg(result)
+    assert ">4&#176;<" in svg and ">20&#176;<" not in svg
+    result["frames"][0]["posture_error_deg"] = 30.0
+    assert ">40&#176;<" in media.error_plot_svg(result)
+
+
 def test_report_stills_show_a_segment_where_the_video_disagrees():
     result = fake_result()  # errors grow with t: segment 1's worst frame is its last
     first = media.still_frames(result, n=2)

@@ -360,13 +360,24 @@ def result_bvh(result: dict[str, Any], dest: Path) -> Path:
     return write_bvh(dest, joints, fps)
 
 
+#: Heights (deg) of the error plots' axes, four whole-degree grid steps each (analysis.js too)
+PLOT_TOPS = (4, 8, 12, 20, 40, 60, 80, 120, 180)
+
+
+def plot_top(most: float) -> int:
+    """The axis height for curves that reach ``most`` deg: the smallest of :data:`PLOT_TOPS`
+    with 10 % to spare. The axis fits the curves, so small errors still show which frames
+    stand out."""
+    return next((v for v in PLOT_TOPS if v >= most * 1.1), PLOT_TOPS[-1])
+
+
 def error_plot_svg(result: dict[str, Any], *, width: int = 720, height: int = 180) -> str:
     """eps_t' over the video frames with segment boundaries, as an inline SVG (printable)."""
     frames = result.get("frames") or []
     if not frames:
         return ""
     err = np.array([f["posture_error_deg"] for f in frames], float)
-    top = max(float(np.nanmax(err)) if np.isfinite(err).any() else 1.0, 10.0) * 1.1
+    top = plot_top(float(np.nanmax(err)) if np.isfinite(err).any() else 0.0)
     n = max(len(frames) - 1, 1)
     pad = 30
 
@@ -392,7 +403,7 @@ def error_plot_svg(result: dict[str, Any], *, width: int = 720, height: int = 18
             f'<line x1="{x(s["performer_start"]):.1f}" x2="{x(s["performer_start"]):.1f}" '
             f'y1="6" y2="{height - 20}" stroke="#999" stroke-dasharray="3 3"/>'
         )
-    for v in np.linspace(0, top, 4)[:-1]:
+    for v in np.linspace(0, top, 5):
         parts.append(f'<text x="2" y="{y(v) + 4:.1f}" font-size="10">{v:.0f}&#176;</text>')
     parts.append(f'<polyline points="{pts}" fill="none" stroke="#c92a2a" stroke-width="2"/>')
     parts.append(f'<text x="{pad}" y="{height - 4}" font-size="10">frame 0</text>')

@@ -218,12 +218,14 @@
   function buildPlot() {
     const W = 1000, H = 200, L = 40, R = 8, T = 10, B = 24;
     const bones = picked();
-    let top = 10;
+    let most = 0;
     result.frames.forEach(function (f) {
-      top = Math.max(top, f.posture_error_deg);
-      bones.forEach(function (b) { top = Math.max(top, f.bone_errors_deg[b]); });
+      most = Math.max(most, f.posture_error_deg);
+      bones.forEach(function (b) { most = Math.max(most, f.bone_errors_deg[b]); });
     });
-    top = Math.ceil(top * 1.1 / 10) * 10;
+    // The axis fits the curves, so small errors still show which frames stand out; its four
+    // grid steps are whole degrees (the same heights as PLOT_TOPS in web/pages/media.py).
+    const top = [4, 8, 12, 20, 40, 60, 80, 120, 180].find(function (v) { return v >= most * 1.1; }) || 180;
     const x = function (i) { return L + (W - L - R) * i / Math.max(n - 1, 1); };
     const y = function (v) { return T + (H - T - B) * (1 - v / top); };
     const s = svg("svg", { viewBox: "0 0 " + W + " " + H, preserveAspectRatio: "none", id: "plot-svg" });
