@@ -195,20 +195,10 @@ class CandidateChunk:
 
 
 def _reference_segments(reference: Any, reference_path: PathLike) -> Segments:
-    """Reference boundaries (thesis 2.1.1 item 4), named and tuned by the domain file (6.8)."""
-    from engine.reference.boundaries import reference_boundaries
-    from engine.reference.domain import find_domain
+    """Reference segments (thesis 2.1.1 item 4), set, named and tuned by the domain file (6.8)."""
+    from engine.reference.domain import find_domain, reference_segments
 
-    domain = find_domain(reference_path)
-    kw: dict[str, Any] = {}
-    if domain is not None and domain.boundary_joints:
-        kw["joint"] = domain.boundary_joints[0]
-    if domain is not None and domain.direction_change_deg is not None:
-        kw["threshold_deg"] = domain.direction_change_deg
-    segs = reference_boundaries(reference.motion, **kw)
-    if domain is not None and len(domain.segment_names) == len(segs.starts):
-        segs = Segments(segs.starts, segs.end, domain.segment_names)
-    return segs
+    return reference_segments(reference.motion, find_domain(reference_path))
 
 
 def prepare(

@@ -44,8 +44,13 @@ def _hide_paths(message: str, path: Path) -> str:
     return message
 
 
-#: Keys of the domain JSON used at import (the rest is engine.reference.domain's format).
-IMPORT_KEYS = ("mapping", "units_to_m", "segments")
+class InvalidDomain(InvalidInput):
+    """The domain configuration does not fit the reference it comes with."""
+
+
+#: Keys of the domain JSON used at import (the rest is engine.reference.domain's format,
+#: segment starts included).
+IMPORT_KEYS = ("mapping", "units_to_m")
 
 
 def engine_domain(domain: dict[str, Any]) -> dict[str, Any]:
@@ -55,8 +60,8 @@ def engine_domain(domain: dict[str, Any]) -> dict[str, Any]:
 
 def parse_domain(raw: bytes) -> dict[str, Any]:
     """A domain configuration: one JSON object. Import keys ``mapping`` (our joint -> BVH
-    joint), ``units_to_m`` and ``segments`` (reference frame boundaries), plus the engine's
-    domain format (segment names, bone weights, tolerances: engine.reference.domain)."""
+    joint) and ``units_to_m``, plus the engine's domain format (segment starts and names,
+    bone weights, tolerances, boundary joints: engine.reference.domain)."""
     try:
         data = json.loads(raw.decode("utf-8"))
     except (UnicodeDecodeError, ValueError) as exc:
@@ -74,11 +79,6 @@ def parse_domain(raw: bytes) -> dict[str, Any]:
         isinstance(units, int | float) and math.isfinite(units) and units > 0
     ):
         raise InvalidInput("domain 'units_to_m' must be a positive number")
-    segments = data.get("segments")
-    if segments is not None and not (
-        isinstance(segments, list) and all(isinstance(s, int) and s >= 0 for s in segments)
-    ):
-        raise InvalidInput("domain 'segments' must be a list of reference frame numbers")
     try:
         from engine.reference.domain import parse_domain as engine_parse
     except ImportError:  # older engine without domain knowledge
@@ -89,20 +89,39 @@ def parse_domain(raw: bytes) -> dict[str, Any]:
 
 def inspect_reference(path: Path, domain: dict[str, Any] | None) -> dict[str, Any]:
     """Import the BVH onto the 17-joint body (refusing unmappable files, naming the missing
-    joints) and return the derived description stored with the reference."""
+    joints) and return the derived description stored with the reference.
+
+    ``segments`` holds the segment boundaries every analysis of this reference uses (the
+    domain's starts, or those detected from the motion), then the last frame: n + 1 frame
+    numbers for n segments. Segment names that do not match their number are refused here,
+    where the coach can fix them, rather than dropped at analysis time.
+    """
     from engine.io.bvh import load_reference
+    from engine.reference.domain import parse_domain as engine_parse
+    from engine.reference.domain import reference_segments
 
     domain = domain or {}
     ref = load_reference(path, mapping=domain.get("mapping"), units_to_m=domain.get("units_to_m"))
     motion = ref.motion
-    frames = int(motion.frames)
-    segments = sorted({int(s) for s in domain.get("segments", []) if int(s) < frames})
+    knowledge = engine_parse(engine_domain(domain), source="domain configuration")
+    try:
+        segs = reference_segments(motion, knowledge)
+    except InvalidInput as exc:  # the coach's starts lie outside the motion
+        raise InvalidDomain(str(exc)) from None
+    names = knowledge.segment_names
+    if names and len(names) != len(segs.starts):
+        found = ", ".join(str(s) for s in segs.starts)
+        raise InvalidDomain(
+            f"domain segment_names: the motion has {len(segs.starts)} segments (detected, "
+            f"starting at frames {found}), got {len(names)} names; give their starts in "
+            "'segments' to set them yourself"
+        )
     return {
-        "frames": frames,
+        "frames": int(motion.frames),
         "fps": float(motion.fps),
         "duration_s": float(motion.duration_s),
         "first_motion_frame": int(motion.first_motion_frame),
         "profile": str(ref.profile),
         "source_joints": list(ref.source_joint_names),
-        "segments": segments,
+        "segments": [*segs.starts, segs.end],
     }

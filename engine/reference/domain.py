@@ -8,11 +8,18 @@ stance is both fine). They change the *reported score* only, never the raw error
       "version": 1,
       "sport": "golf",
       "segment_names": ["address", "takeaway", "top", "downswing", "impact", "finish"],
+      "segments": [1, 60, 130, 170, 190, 215],
       "bone_weights": {"hip->lower_chest": 3, "l_elbow": 2},
       "tolerances_deg": {"l_knee": 15, "r_knee": 15},
       "default_tolerance_deg": 0,
       "boundary": {"joints": ["r_wrist"], "direction_change_deg": 120}
     }
+
+``segments`` (optional) lists the reference frame each segment starts at (frame numbers count
+the file's frames); the last segment ends at the motion's last frame. Without it the
+boundaries are detected from the ``boundary`` joints' direction changes (thesis 5.4.2), and
+``segment_names`` must then name as many segments as are detected (``coach reference inspect
+REF.bvh`` prints them).
 
 Bones are named either ``parent->child`` (:data:`engine.body.skeleton.BONE_NAMES`) or by the
 joint they end at (``"l_elbow"`` = upper arm ``l_shoulder->l_elbow``). Unnamed bones get weight
@@ -31,11 +38,13 @@ import numpy as np
 
 from engine.body.skeleton import BONE_NAMES, JOINT_INDEX, JOINTS, N_BONES
 from engine.errors import InvalidInput
+from engine.reference.boundaries import reference_boundaries, segments_from_list
+from engine.types import Motion, Segments
 
 GOLF_SEGMENT_NAMES = ("address", "takeaway", "top", "downswing", "impact", "finish")
 _KEYS = {
     "version", "sport", "segment_names", "bone_weights", "tolerances_deg",
-    "default_tolerance_deg", "boundary", "notes",
+    "default_tolerance_deg", "boundary", "notes", "segments",
 }  # fmt: skip
 
 
@@ -48,6 +57,8 @@ class Domain:
     sport : str
     segment_names : tuple of str
         One per reference segment, or empty to keep the reference's own names.
+    segment_starts : tuple of int
+        The coach's own segment starts (reference frames), or empty to detect them.
     bone_weights : ndarray, shape (16,)
         Non-negative, at least one positive.
     tolerances : ndarray, shape (16,)
@@ -60,6 +71,7 @@ class Domain:
 
     sport: str = ""
     segment_names: tuple[str, ...] = ()
+    segment_starts: tuple[int, ...] = ()
     bone_weights: np.ndarray = field(default_factory=lambda: np.ones(N_BONES))
     tolerances: np.ndarray = field(default_factory=lambda: np.zeros(N_BONES))
     boundary_joints: tuple[str, ...] = ()
@@ -85,6 +97,7 @@ class Domain:
         return {
             "sport": self.sport,
             "segment_names": list(self.segment_names),
+            "segment_starts": list(self.segment_starts),
             "bone_weights": [float(w) for w in self.bone_weights],
             "tolerances_deg": [float(t) for t in np.degrees(self.tolerances)],
             "boundary_joints": list(self.boundary_joints),
@@ -130,7 +143,8 @@ def parse_domain(doc: Any, *, n_segments: int | None = None, source: str = "doma
     doc : dict
         The JSON content.
     n_segments : int, optional
-        Number of reference segments; when given, ``segment_names`` must match it.
+        Number of detected reference segments; when given and the document sets no
+        ``segments`` of its own, ``segment_names`` must match it.
     source : str
         Name used in error messages (the file path).
 
@@ -149,7 +163,22 @@ def parse_domain(doc: Any, *, n_segments: int | None = None, source: str = "doma
     names = doc.get("segment_names", [])
     if not isinstance(names, list) or not all(isinstance(n, str) and n for n in names):
         raise InvalidInput(f"{source}.segment_names: expected a list of non-empty strings")
-    if n_segments is not None and names and len(names) != n_segments:
+    starts = doc.get("segments", [])
+    if (
+        not isinstance(starts, list)
+        or not all(isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in starts)
+        or any(b <= a for a, b in zip(starts, starts[1:], strict=False))
+    ):
+        raise InvalidInput(
+            f"{source}.segments: expected the reference frames where the segments start, "
+            f"whole numbers >= 0 in increasing order, got {starts!r}"
+        )
+    if starts and names and len(names) != len(starts):
+        raise InvalidInput(
+            f"{source}.segment_names: {len(starts)} segments start in 'segments', "
+            f"got {len(names)} names"
+        )
+    if not starts and n_segments is not None and names and len(names) != n_segments:
         raise InvalidInput(
             f"{source}.segment_names: the reference has {n_segments} segments, "
             f"got {len(names)} names"
@@ -180,9 +209,38 @@ def parse_domain(doc: Any, *, n_segments: int | None = None, source: str = "doma
     if not isinstance(sport, str):
         raise InvalidInput(f"{source}.sport: expected a string")
     return Domain(
-        sport=sport, segment_names=tuple(names), bone_weights=weights,
+        sport=sport, segment_names=tuple(names), segment_starts=tuple(starts),
+        bone_weights=weights,
         tolerances=np.radians(tol), boundary_joints=tuple(joints), direction_change_deg=change,
     )  # fmt: skip
+
+
+def reference_segments(motion: Motion, domain: Domain | None) -> Segments:
+    """The reference's segments as every analysis uses them (thesis 2.1.1 item 4, 6.8).
+
+    The coach's ``segments`` when the domain gives them, else the boundaries detected from
+    the domain's boundary joint and threshold (or the defaults); named by ``segment_names``
+    when there are as many names as segments.
+
+    Raises
+    ------
+    InvalidInput
+        The coach's starts lie outside the reference's frames.
+    """
+    if domain is not None and domain.segment_starts:
+        try:
+            return segments_from_list(domain.segment_starts, motion, domain.segment_names or None)
+        except InvalidInput as exc:
+            raise InvalidInput(f"domain segments: {exc}") from None
+    kw: dict[str, Any] = {}
+    if domain is not None and domain.boundary_joints:
+        kw["joint"] = domain.boundary_joints[0]
+    if domain is not None and domain.direction_change_deg is not None:
+        kw["threshold_deg"] = domain.direction_change_deg
+    segs = reference_boundaries(motion, **kw)
+    if domain is not None and len(domain.segment_names) == len(segs.starts):
+        segs = Segments(segs.starts, segs.end, domain.segment_names)
+    return segs
 
 
 def domain_path(reference_path: str | os.PathLike[str]) -> Path:
@@ -223,5 +281,6 @@ __all__ = [
     "domain_path",
     "find_domain",
     "load_domain",
+    "reference_segments",
     "parse_domain",
 ]

@@ -1,3 +1,5 @@
+import pytest
+
 from tests.app.conftest import data_files, make_club, stored_files
 
 
@@ -36,13 +38,46 @@ def test_domain_json_is_checked_and_kept(client, club, bvh_file):
             files={"file": ("a.bvh", f), "domain": ("d.json", b'{"segments": [1, 200, 400]}')},
         )  # fmt: skip
     assert r.status_code == 201, r.text
-    assert r.json()["derived"]["segments"] == [1, 200, 400]
+    derived = r.json()["derived"]
+    # the coach's starts, then the last frame: every analysis of it uses these three segments
+    assert derived["segments"] == [1, 200, 400, derived["frames"] - 1]
     with open(bvh_file, "rb") as f:
         r = client.post(
             "/api/v1/references", headers=club.headers,
             files={"file": ("a.bvh", f), "domain": ("d.json", b"[1, 2")},
         )  # fmt: skip
     assert r.status_code == 422 and r.json()["error"]["code"] == "invalid_domain"
+
+
+@pytest.mark.parametrize(
+    ("doc", "says"),
+    [
+        (b'{"segments": [1, 200, 100000]}', "segments"),  # beyond the motion's last frame
+        (b'{"segments": [200, 1]}', "increasing"),
+        (b'{"segments": [1, 200], "segment_names": ["a", "b", "c"]}', "2 segments"),
+        (b'{"segment_names": ["a", "b", "c", "d", "e", "f", "g", "h"]}', "detected"),
+    ],
+)
+def test_domain_segments_that_do_not_fit_the_motion_are_refused(client, club, bvh_file, doc, says):
+    with open(bvh_file, "rb") as f:
+        r = client.post(
+            "/api/v1/references", headers=club.headers,
+            files={"file": ("a.bvh", f), "domain": ("d.json", doc)},
+        )  # fmt: skip
+    assert r.status_code == 422, r.text
+    assert r.json()["error"]["code"] == "invalid_domain"
+    assert says in r.json()["error"]["message"]
+
+
+def test_detected_segments_are_stored_when_the_domain_gives_none(client, club, bvh_file):
+    from engine.io.bvh import load_reference
+    from engine.reference.boundaries import reference_boundaries
+
+    with open(bvh_file, "rb") as f:
+        r = client.post("/api/v1/references", headers=club.headers, files={"file": ("a.bvh", f)})
+    assert r.status_code == 201, r.text
+    seg = reference_boundaries(load_reference(bvh_file).motion)
+    assert r.json()["derived"]["segments"] == [*seg.starts, seg.end]
 
 
 def test_other_clubs_reference_is_404(client, app, club_ref):

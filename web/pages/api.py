@@ -200,6 +200,12 @@ def update_domain(
         config = validation.parse_domain(json.dumps(config).encode())
     except InvalidInput as exc:
         raise ApiError(422, "invalid_domain", str(exc)) from None
+    n = len((ref.derived or {}).get("segments") or []) - 1  # boundaries: n + 1 frames
+    if config["segment_names"] and n > 0 and len(config["segment_names"]) != n:
+        raise ApiError(
+            422, "invalid_domain",
+            f"the reference has {n} segments, got {len(config['segment_names'])} names",
+        )  # fmt: skip
     path = storage.reference_dir(ref.id) / "reference.domain.json"
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".tmp")

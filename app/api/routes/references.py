@@ -64,6 +64,8 @@ async def create_reference(
                 raise ApiError(422, "invalid_domain", str(exc)) from None
         try:
             derived = await run_in_threadpool(validation.inspect_reference, bvh, domain_config)
+        except validation.InvalidDomain as exc:
+            raise ApiError(422, "invalid_domain", str(exc)) from None
         except InvalidInput as exc:
             raise ApiError(422, "invalid_reference", str(exc)) from None
         label = name or (Path(file.filename or "").stem[:200] or "reference")

@@ -15,6 +15,7 @@ from engine.reference.domain import (
     find_domain,
     load_domain,
     parse_domain,
+    reference_segments,
 )
 
 
@@ -67,6 +68,10 @@ def test_score_changes_but_raw_errors_do_not():
         ({"boundary": {"joints": ["tail"]}}, "boundary.joints"),
         ({"boundary": {"direction_change_deg": 500}}, "direction_change_deg"),
         ({"sport": 3}, "sport"),
+        ({"segments": [1, "top"]}, "segments: expected the reference frames"),
+        ({"segments": [5, 5]}, "increasing"),
+        ({"segments": [-1, 5]}, "segments"),
+        ({"segments": [1, 50], "segment_names": ["a", "b", "c"]}, "2 segments start"),
     ],
 )
 def test_invalid_documents_are_refused(doc, match):
@@ -88,3 +93,29 @@ def test_file_errors(tmp_path):
     bad.write_text("{not json")
     with pytest.raises(InvalidInput, match="not valid JSON"):
         load_domain(bad)
+
+
+def test_the_coach_sets_the_segments_or_they_are_detected(tmp_path, cmu_bvh):
+    """Every analysis takes its reference segments from here (engine.pipeline)."""
+    from engine.io.bvh import load_reference
+    from engine.pipeline import _reference_segments
+    from engine.reference.boundaries import reference_boundaries
+
+    bvh = tmp_path / "swing.bvh"
+    bvh.write_bytes(cmu_bvh.read_bytes())
+    motion = load_reference(bvh).motion
+    detected = reference_boundaries(motion)
+    assert len(detected.starts) > 1
+    assert reference_segments(motion, None) == detected
+    names = [f"part {i}" for i in range(len(detected.starts))]
+    named = reference_segments(motion, parse_domain({"segment_names": names}))
+    assert named.starts == detected.starts and named.names == tuple(names)
+    # names that do not match the detected count are not forced onto them
+    assert reference_segments(motion, parse_domain({"segment_names": ["x"]})).names[0] == ""
+    doc = {"segments": [1, 100, 300], "segment_names": ["a", "b", "c"]}
+    domain_path(bvh).write_text(json.dumps(doc))
+    own = _reference_segments(load_reference(bvh), bvh)
+    assert own.starts == (1, 100, 300) and own.end == motion.frames - 1
+    assert own.names == ("a", "b", "c")
+    with pytest.raises(InvalidInput, match="domain segments"):
+        reference_segments(motion, parse_domain({"segments": [1, motion.frames]}))
