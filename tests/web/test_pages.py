@@ -241,6 +241,9 @@ def test_reference_thumbnail_and_domain_edit(env):
     bad = client.put(f"/web/api/references/{ids['ref']}/domain",
                      json={"bone_weights": {"tail": 1}})  # fmt: skip
     assert bad.status_code == 422
+    three = client.put(f"/web/api/references/{ids['ref']}/domain",
+                       json={"segment_names": ["a", "b", "c"]})  # fmt: skip
+    assert three.status_code == 422 and "2 segments, got 3" in three.text
     sign_in(client, "p@a.org")
     assert client.put(f"/web/api/references/{ids['ref']}/domain", json={}).status_code == 403
 
