@@ -40,7 +40,7 @@
     const dom = r.domain || {};
     const id = "ref" + r.id;
     const names = r.segment_names.length ? r.segment_names : (dom.segment_names || []);
-    const segInput = coach.el("textarea", { id: id + "-segs", rows: 2 });
+    const segInput = coach.el("textarea", { id: id + "-segs", rows: Math.min(Math.max(names.length, 2), 12) });
     segInput.value = names.join("\n");
     const nameInput = coach.el("input", { id: id + "-name", maxlength: 200, value: r.name });
     const dflt = coach.el("input", { id: id + "-dtol", type: "number", min: 0, max: 180, step: 1, value: dom.default_tolerance_deg || 0 });
@@ -54,7 +54,7 @@
     const status = coach.el("p", { class: "saved", role: "status" });
     const f = coach.el("form", { class: "stack", "aria-label": "Edit " + r.name }, [
       coach.el("label", { for: id + "-name", text: "Name" }), nameInput,
-      coach.el("label", { for: id + "-segs", text: "Segment names (one a line, in order)" }), segInput,
+      coach.el("label", { for: id + "-segs", text: "Segment names (" + (r.segment_names.length ? r.segment_names.length + " segments, " : "") + "one a line, in order)" }), segInput,
       coach.el("label", { for: id + "-dtol", text: "Default tolerance (degrees)" }), dflt,
       coach.el("details", {}, [coach.el("summary", { text: "Per-bone weights and tolerances" }), grid]),
       coach.el("button", { type: "submit", class: "primary", text: "Save" }), status,
