@@ -68,6 +68,9 @@ def test_upload_through_the_page_runs_to_results(server, browser, clip, shots):
     sign_in(page, server.url, "pat@example.com")
     assert page.url.endswith("/upload")
     page.wait_for_selector(".ref-option canvas[data-ready=true]")
+    # the demo reference's segments, detected when it was added (unnamed: counted)
+    demo = page.locator(".ref-option", has_text="CMU 64_29")
+    assert demo.locator(".segs").first.inner_text() == "3 segments"
     page.set_input_files("#video", str(clip))
     page.screenshot(path=str(shots / "upload.png"), full_page=True)
     page.get_by_role("button", name="Upload and analyse").click()

@@ -46,7 +46,9 @@
     if (!refs.length) { list.append(coach.el("p", { text: "No reference motions yet: ask your coach to add one." })); return; }
     refs.forEach(function (r, i) {
       const id = "ref-" + r.id;
-      const segs = r.segment_names.length ? r.segment_names.join(" · ") : "one segment";
+      const k = r.segment_names.length;
+      const unnamed = r.segment_names.every(function (s, j) { return s === "segment " + (j + 1); });
+      const segs = k > 1 && unnamed ? k + " segments" : k ? r.segment_names.join(" · ") : "one segment";
       const radio = coach.el("input", { type: "radio", name: "reference_id", value: r.id, id: id });
       if (i === 0) radio.checked = true;
       const canvas = coach.el("canvas", { class: "ref-preview", width: 240, height: 120, role: "img",
