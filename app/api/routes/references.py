@@ -31,8 +31,13 @@ def too_large(what: str, limit: int) -> ApiError:
     description=(
         "The BVH is imported onto the 17-joint body before it is accepted; a file whose "
         "skeleton cannot be mapped is refused with 422 naming the missing joints. The optional "
-        "domain JSON may hold `mapping` (our joint -> BVH joint), `units_to_m` and `segments` "
-        "(reference frame numbers of segment boundaries)."
+        "domain JSON may hold `mapping` (our joint -> BVH joint), `units_to_m`, `segments` "
+        "(the reference frames where the segments start; without it they are detected) and "
+        "the engine's domain keys (`segment_names`, `bone_weights`, `tolerances_deg`, "
+        "`default_tolerance_deg`, `boundary`). `derived.segments` gives the segment "
+        "boundaries every analysis uses: the starts, then the last frame. Starts outside the "
+        "motion, or names that do not match the number of segments, are refused with 422 "
+        "`invalid_domain`."
     ),
     responses=errors(413, 422),
 )
