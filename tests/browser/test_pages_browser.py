@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import re
 
 import numpy as np
 import pytest
@@ -134,6 +135,9 @@ def test_results_overlay_plot_and_cursor_follow_the_video(
     assert box.count() == len(result["summary"]["messages"])
     assert box.last.inner_text() == note
     assert page.locator(".seg-card").count() == len(clip_result["segments"])
+    # degrees under 10 keep a decimal: a segment at 0.4 deg does not read "0 deg"
+    for score in page.locator(".seg-card .score").all_inner_texts():
+        assert re.fullmatch(r"\d\.\d°|\d{2,}°", score), score
     # the card of the segment holding the misfit frames says so, the others do not
     warned = page.locator(".seg-card .seg-misfit")
     assert warned.count() == len({i for i, s in enumerate(result["segments"])

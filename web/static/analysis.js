@@ -17,6 +17,8 @@
   const CHILD = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16];
   const PALETTE = ["#1971c2", "#9c36b5", "#e67700", "#0c8599", "#5f3dc4", "#d6336c", "#2f9e44", "#495057"];
   const MISFIT = "#fab005";  // shading of frames the video does not confirm (image_misfit)
+  // Degrees for people: one decimal under 10 (a segment at 0.4 deg is not "0 deg").
+  function deg(v) { return (Math.abs(v) < 9.95 ? v.toFixed(1) : v.toFixed(0)) + "°"; }
 
   // ---------------------------------------------------------------- progress
   const seenStages = [];
@@ -207,7 +209,7 @@
       const cb = coach.el("input", { type: "checkbox", value: b, id: "bone-" + b });
       cb.checked = worst.indexOf(b) >= 0;
       cb.addEventListener("change", buildPlot);
-      box.append(coach.el("label", { class: "inline", for: "bone-" + b }, [cb, document.createTextNode(name + " (mean " + mean[b].toFixed(0) + "°)")]));
+      box.append(coach.el("label", { class: "inline", for: "bone-" + b }, [cb, document.createTextNode(name + " (mean " + deg(mean[b]) + ")")]));
     });
   }
   function svg(tag, attrs) {
@@ -310,12 +312,12 @@
       const warn = misfit ? coach.el("span", { class: "seg-misfit", text: "⚠ the video disagrees in " + misfit + " of " + span +
         " frames" + (where.length ? ", mostly at " + where.join(", ") : "") + ": look at them yourself" }) : null;
       const card = coach.el("button", { type: "button", class: "seg-card", "data-index": i,
-        "aria-label": s.name + ": mean error " + s.mean_error_deg.toFixed(0) + " degrees" + (misfit ? ", but the video disagrees in " + misfit + " frames; go to the first of them" : "; go to its first frame") }, [
+        "aria-label": s.name + ": mean error " + deg(s.mean_error_deg).slice(0, -1) + " degrees" + (misfit ? ", but the video disagrees in " + misfit + " frames; go to the first of them" : "; go to its first frame") }, [
         coach.el("h3", { text: s.name }),
-        coach.el("span", { class: "score", text: (s.score != null ? s.score : s.mean_error_deg).toFixed(0) + "°" }),
+        coach.el("span", { class: "score", text: deg(s.score != null ? s.score : s.mean_error_deg) }),
         coach.el("span", { class: "muted", text: "frames " + s.performer_start + "–" + s.performer_end }),
         coach.el("span", { text: tempoText(s.tempo_ratio) }),
-        coach.el("ul", {}, s.worst_bones.map(function (wb) { return coach.el("li", { text: wb[0] + ": " + wb[1].toFixed(0) + "°" }); })),
+        coach.el("ul", {}, s.worst_bones.map(function (wb) { return coach.el("li", { text: wb[0] + ": " + deg(wb[1]) }); })),
         warn,  // null (skipped) where the video agrees
       ]);
       card.style.borderLeftColor = misfit ? MISFIT : coach.errorColor(s.mean_error_deg);
@@ -337,7 +339,7 @@
           coach.el("td", { text: s.reference_start + "–" + s.reference_end }),
           coach.el("td", { text: s.tempo_ratio ? s.tempo_ratio.toFixed(2) + "×" : "–" }),
           coach.el("td", { text: s.mean_error_deg.toFixed(1) + "°" }),
-          coach.el("td", { text: s.worst_bones.map(function (wb) { return wb[0] + " " + wb[1].toFixed(0) + "°"; }).join(", ") }),
+          coach.el("td", { text: s.worst_bones.map(function (wb) { return wb[0] + " " + deg(wb[1]); }).join(", ") }),
           coach.el("td", { text: s.misfit_frames ? s.misfit_frames + " frames" + ((s.misfit_bones || []).length ? " (" + s.misfit_bones.join(", ") + ")" : "") : "–" }),
         ]);
         tb.append(tr);
