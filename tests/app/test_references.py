@@ -3,6 +3,13 @@ import pytest
 from tests.app.conftest import data_files, make_club, stored_files
 
 
+def _upload(client, club, bvh_file, domain: bytes | None = None):
+    """POST a reference, with a domain JSON when given."""
+    with open(bvh_file, "rb") as f:
+        files = {"file": ("a.bvh", f)} | ({"domain": ("d.json", domain)} if domain else {})
+        return client.post("/api/v1/references", headers=club.headers, files=files)
+
+
 def test_reference_upload_list_get_delete(client, club_ref, settings):
     h = club_ref.headers
     listed = client.get("/api/v1/references", headers=h).json()
@@ -32,20 +39,12 @@ def test_unmappable_bvh_is_422_naming_missing_joints(client, club, bvh_file, tmp
 
 
 def test_domain_json_is_checked_and_kept(client, club, bvh_file):
-    with open(bvh_file, "rb") as f:
-        r = client.post(
-            "/api/v1/references", headers=club.headers,
-            files={"file": ("a.bvh", f), "domain": ("d.json", b'{"segments": [1, 200, 400]}')},
-        )  # fmt: skip
+    r = _upload(client, club, bvh_file, b'{"segments": [1, 200, 400]}')
     assert r.status_code == 201, r.text
     derived = r.json()["derived"]
     # the coach's starts, then the last frame: every analysis of it uses these three segments
     assert derived["segments"] == [1, 200, 400, derived["frames"] - 1]
-    with open(bvh_file, "rb") as f:
-        r = client.post(
-            "/api/v1/references", headers=club.headers,
-            files={"file": ("a.bvh", f), "domain": ("d.json", b"[1, 2")},
-        )  # fmt: skip
+    r = _upload(client, club, bvh_file, b"[1, 2")
     assert r.status_code == 422 and r.json()["error"]["code"] == "invalid_domain"
 
 
@@ -59,11 +58,7 @@ def test_domain_json_is_checked_and_kept(client, club, bvh_file):
     ],
 )
 def test_domain_segments_that_do_not_fit_the_motion_are_refused(client, club, bvh_file, doc, says):
-    with open(bvh_file, "rb") as f:
-        r = client.post(
-            "/api/v1/references", headers=club.headers,
-            files={"file": ("a.bvh", f), "domain": ("d.json", doc)},
-        )  # fmt: skip
+    r = _upload(client, club, bvh_file, doc)
     assert r.status_code == 422, r.text
     assert r.json()["error"]["code"] == "invalid_domain"
     assert says in r.json()["error"]["message"]
@@ -73,8 +68,7 @@ def test_detected_segments_are_stored_when_the_domain_gives_none(client, club, b
     from engine.io.bvh import load_reference
     from engine.reference.boundaries import reference_boundaries
 
-    with open(bvh_file, "rb") as f:
-        r = client.post("/api/v1/references", headers=club.headers, files={"file": ("a.bvh", f)})
+    r = _upload(client, club, bvh_file)
     assert r.status_code == 201, r.text
     seg = reference_boundaries(load_reference(bvh_file).motion)
     assert r.json()["derived"]["segments"] == [*seg.starts, seg.end]
@@ -101,15 +95,7 @@ def test_performers(client, club):
 
 def test_domain_in_the_engine_format_is_validated(client, club, bvh_file):
     doc = b'{"sport": "golf", "tolerances_deg": {"l_knee": 15}, "segments": [1, 300]}'
-    with open(bvh_file, "rb") as f:
-        r = client.post(
-            "/api/v1/references", headers=club.headers,
-            files={"file": ("a.bvh", f), "domain": ("d.json", doc)},
-        )  # fmt: skip
+    r = _upload(client, club, bvh_file, doc)
     assert r.status_code == 201, r.text
-    with open(bvh_file, "rb") as f:
-        r = client.post(
-            "/api/v1/references", headers=club.headers,
-            files={"file": ("a.bvh", f), "domain": ("d.json", b'{"tolerances_deg": {"toe": 3}}')},
-        )  # fmt: skip
+    r = _upload(client, club, bvh_file, b'{"tolerances_deg": {"toe": 3}}')
     assert r.status_code == 422 and r.json()["error"]["code"] == "invalid_domain"
