@@ -210,8 +210,8 @@ def parse_domain(doc: Any, *, n_segments: int | None = None, source: str = "doma
         raise InvalidInput(f"{source}.sport: expected a string")
     return Domain(
         sport=sport, segment_names=tuple(names), segment_starts=tuple(starts),
-        bone_weights=weights,
-        tolerances=np.radians(tol), boundary_joints=tuple(joints), direction_change_deg=change,
+        bone_weights=weights, tolerances=np.radians(tol), boundary_joints=tuple(joints),
+        direction_change_deg=change,
     )  # fmt: skip
 
 
