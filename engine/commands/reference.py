@@ -57,13 +57,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from engine.io.bvh import load_reference
     from engine.reference.boundaries import reference_boundaries
+    from engine.reference.domain import domain_path, find_domain, reference_segments
 
     ref = load_reference(args.bvh, units_to_m=args.units_to_m)
     m = ref.motion
-    seg = reference_boundaries(
-        m, joint=args.joint, threshold_deg=args.threshold_deg, min_segment_s=args.min_segment_s
-    )
-    for line in describe(ref, seg, args.joint, args.threshold_deg):
+    domain = find_domain(args.bvh)
+    if domain is not None and domain.segment_starts:  # what every analysis of it will use
+        seg = reference_segments(m, domain)
+        source = f"set by {domain_path(args.bvh).name}"
+    else:
+        seg = reference_boundaries(
+            m, joint=args.joint, threshold_deg=args.threshold_deg, min_segment_s=args.min_segment_s
+        )
+        source = f"{args.joint} velocity direction change > {args.threshold_deg:g} deg"
+    for line in describe(ref, seg, source):
         print(line)
     if args.plot is not None:
         plot(ref, seg, args.joint, args.threshold_deg, args.plot)
@@ -71,8 +78,8 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def describe(ref, seg, joint: str, threshold_deg: float) -> list[str]:
-    """Lines of the inspection report."""
+def describe(ref, seg, source: str) -> list[str]:
+    """Lines of the inspection report; ``source`` says where the segments come from."""
     m = ref.motion
     h = float(ref.shape.height * 1.04)
     out = [
@@ -90,9 +97,7 @@ def describe(ref, seg, joint: str, threshold_deg: float) -> list[str]:
     ]
     for src, ours in zip(ref.source_joint_names, JOINTS, strict=True):
         out.append(f"  {src:>24} -> {ours}")
-    out.append(
-        f"segments    {len(seg.starts)} ({joint} velocity direction change > {threshold_deg:g} deg)"
-    )
+    out.append(f"segments    {len(seg.starts)} ({source})")
     for k, (a, b) in enumerate(seg.bounds()):
         out.append(f"  {k:2d}: frames {a:5d} - {b:5d}   {a / m.fps:7.3f} s - {b / m.fps:7.3f} s")
     return out

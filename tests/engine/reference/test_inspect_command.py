@@ -16,6 +16,19 @@ def test_inspect_cmu_prints_mapping_and_segments(cmu_bvh, tmp_path, capsys):
     assert png.stat().st_size > 10_000
 
 
+def test_inspect_shows_the_segments_a_domain_file_sets(cmu_bvh, tmp_path, capsys):
+    bvh = tmp_path / "swing.bvh"
+    bvh.write_bytes(cmu_bvh.read_bytes())
+    (tmp_path / "swing.domain.json").write_text('{"segments": [1, 100, 300]}')
+    assert main(["reference", "inspect", str(bvh)]) == 0
+    out = capsys.readouterr().out
+    assert "segments    3 (set by swing.domain.json)" in out
+    assert "frames   100 -   300" in out and "frames   300 -   579" in out
+    (tmp_path / "swing.domain.json").write_text('{"segments": [1, 100, 900]}')
+    assert main(["reference", "inspect", str(bvh)]) == 2
+    assert "domain segments" in capsys.readouterr().err
+
+
 def test_inspect_bad_file_is_one_line_error(tmp_path, capsys):
     p = tmp_path / "x.bvh"
     p.write_text("not a bvh\n")
