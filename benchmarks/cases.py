@@ -9,7 +9,7 @@ of ``coach serve`` is a seventh case. The last three columns judge the ``image_m
 the fraction of frames flagged and the true posture error of the flagged and the other frames.
 
     python benchmarks/cases.py [--set '{"foreground": {"min_free_fraction": 0.3}}'] \
-        [--cache /tmp/coach-cases] [--jobs 2] [--only syn_64_24] [--save /tmp/results]
+        [--cache /tmp/coach-cases] [--jobs 2] [--only syn_64_24] [--save /tmp/results] [--extra]
 """
 
 from __future__ import annotations
@@ -28,6 +28,9 @@ sys.path.insert(0, str(REPO))
 SHARED = REPO.parent / "shared"
 # (reference, seed): the synthetic cases of the note of 2026-11-25
 SYNTHETIC = (("64_17", 1), ("64_24", 2), ("64_29", 3), ("64_30", 4))
+# four more, with ``--extra``: settings chosen on the seven above are checked on cases they
+# were not chosen on
+EXTRA = (("64_17", 11), ("64_24", 12), ("64_29", 13), ("64_30", 14))
 # the demo analysis of `coach serve` (app.commands.seed_demo_analysis): a lifted foot and a
 # turned head in the last segment
 DEMO = ("64_29", 7, ("--fps", "15", "--n-wrong", "1", "--error-deg", "25"))
@@ -81,12 +84,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--only", default="", help="only the cases whose name contains this")
     ap.add_argument("--save", type=Path, help="write each case's result.json into this folder")
+    ap.add_argument("--extra", action="store_true", help="also the four EXTRA synthetic cases")
     args = ap.parse_args(argv)
     settings = json.loads(args.set)
     args.cache.mkdir(parents=True, exist_ok=True)
     cases = sorted((SHARED / "bench" / "cases").iterdir())
     cases += [synthetic_case(name, seed, args.cache) for name, seed in SYNTHETIC]
     cases.append(synthetic_case(DEMO[0], DEMO[1], args.cache, DEMO[2]))
+    if args.extra:
+        cases += [synthetic_case(name, seed, args.cache) for name, seed in EXTRA]
     cases = [c for c in cases if args.only in c.name]
     with ProcessPoolExecutor(args.jobs) as pool:
         if args.save is not None:

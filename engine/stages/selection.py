@@ -21,7 +21,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d
+from scipy.ndimage import gaussian_filter1d, median_filter
 
 from engine.body.kinematics import bone_directions
 from engine.body.skeleton import JOINT_INDEX, N_JOINTS
@@ -101,20 +101,25 @@ class SelectionSettings:
         1.61 with 3; with the true C as input 0.06 -> 0.55 without, 0.2 with 1. Larger
         values stop the DP from correcting a rough C with good candidates (the synthetic
         test with stage 2's uniform-speed C needs <= ~2). 0 gives the thesis' DP.
-    error_smoothing_s : float
-        Std, seconds, of the Gaussian that smooths each bone's error over time within each
-        performer segment (0 disables it). The thesis asks for a small rate of change of
-        eps_t' within a segment (2.1.3 item 6, 2.1.6 D) through d_s in the DP (eq. 4.24); this
-        also smooths the reported errors themselves. A performer's deviation from
-        the reference persists for tenths of a second (the public cases' truth: lag-1
+    error_smoothing_s, error_median_frames : float, int
+        Each bone's error is smoothed over time within each performer segment: a running
+        median of ``error_median_frames`` (odd; 1 disables it), then a Gaussian of std
+        ``error_smoothing_s`` seconds (0 disables it). The thesis asks for a small rate of
+        change of eps_t' within a segment (2.1.3 item 6, 2.1.6 D) through d_s in the DP
+        (eq. 4.24); this also smooths the reported errors themselves. A performer's
+        deviation persists for tenths of a second (the public cases' truth: lag-1
         autocorrelation of eps_t' 0.99), while the selected candidates flicker between
-        neighbouring solutions (ours 0.91 on P1, 0.73 on P2). Only the errors are smoothed;
-        the selected postures are the frames' own. ``benchmarks/cases.py --save`` then
-        ``benchmarks/smoothing.py`` (rank correlation of eps_t' with the truth / bone-error
-        estimation error, deg, mean of seven cases): 0 s 0.663 / 3.77, 0.033 s 0.679 / 3.68,
-        0.05 s 0.681 / 3.67, 0.1 s 0.674 / 3.65, 0.15 s 0.659 / 3.64. Longer kernels help P1
-        (0.61 -> 0.70 at 0.1 s) but blur errors that change fast within a short segment
-        (``syn_64_17_1`` 0.75 -> 0.69).
+        neighbouring solutions (ours 0.91 on P1, 0.73 on P2), and now and then one frame's
+        candidate jumps alone: the median drops such a spike, which the Gaussian alone would
+        spread over its neighbours. Only the errors are smoothed; the selected postures are
+        the frames' own. ``benchmarks/cases.py --extra --save DIR`` with both off, then
+        ``benchmarks/smoothing.py DIR`` (rank correlation of eps_t' with the truth /
+        bone-error estimation error in deg, mean of eleven cases): none 0.596 / 3.58;
+        Gaussian 0.05 s alone 0.602 / 3.48 (``syn_64_29_13`` 0.32 -> 0.17: spikes spread);
+        median 3 alone 0.608 / 3.52; median 3 then 0.05 s 0.622 / 3.47 (P1 0.61 -> 0.67, P2
+        0.49 -> 0.52, ``syn_64_29_13`` 0.38); median 5 then 0.05 s 0.616 / 3.46; median 3
+        then 0.1 s 0.622 / 3.45 (``syn_64_17_1`` 0.75 -> 0.69: errors that change fast
+        within a short segment blur).
     """
 
     window_k: float = 10.0
@@ -133,6 +138,7 @@ class SelectionSettings:
     anchor_deg_per_frame: float = 1.0
     misfit_margin: float = 0.03
     error_smoothing_s: float = 0.05
+    error_median_frames: int = 3
 
 
 @dataclass(frozen=True)
@@ -530,25 +536,35 @@ def owned_frames(spans: Sequence[tuple[int, int]]) -> list[tuple[int, int]]:
 
 
 def smooth_errors(
-    bone_err: np.ndarray, owned: Sequence[tuple[int, int]], sigma_frames: float
+    bone_err: np.ndarray,
+    owned: Sequence[tuple[int, int]],
+    sigma_frames: float,
+    median_frames: int = 1,
 ) -> np.ndarray:
-    """Each bone's error (T', 16) smoothed over time by a Gaussian of std ``sigma_frames``.
+    """Each bone's error (T', 16) over time: a running median of ``median_frames``, then a
+    Gaussian of std ``sigma_frames``.
 
     Within each segment's own frames ``owned`` (:func:`owned_frames`) only: thesis 2.1.3
     item 6 and 2.1.6 D, the motion is smooth within a segment so its posture errors change
-    slowly there, and they may change at its boundaries. Near a
-    segment's ends the kernel is cut there and renormalised, so an end frame's error is
-    neither pulled towards zero nor counted more than once.
+    slowly there, and they may change at its boundaries. The median drops a frame whose
+    selected candidate jumped alone (the Gaussian alone would spread that spike over its
+    neighbours). Near a segment's ends the Gaussian is cut there and renormalised, so an end
+    frame's error is neither pulled towards zero nor counted more than once.
     """
-    if sigma_frames <= 0:
+    if sigma_frames <= 0 and median_frames <= 1:
         return bone_err
     out = bone_err.copy()
     for first, last in owned:
-        if last > first:
-            x = bone_err[first : last + 1]
+        if last <= first:
+            continue
+        x = bone_err[first : last + 1]
+        if median_frames > 1:
+            x = median_filter(x, size=(median_frames, 1), mode="nearest")
+        if sigma_frames > 0:
             num = gaussian_filter1d(x, sigma_frames, axis=0, mode="constant")
             den = gaussian_filter1d(np.ones(len(x)), sigma_frames, mode="constant")
-            out[first : last + 1] = num / den[:, None]
+            x = num / den[:, None]
+        out[first : last + 1] = x
     return out
 
 
@@ -611,6 +627,10 @@ def select_and_refine(
     if not s.error_smoothing_s >= 0:  # also refuses NaN
         raise InvalidInput(
             f"settings.error_smoothing_s must be >= 0, got {s.error_smoothing_s}"
+        )
+    if s.error_median_frames < 1 or s.error_median_frames % 2 == 0:
+        raise InvalidInput(
+            f"settings.error_median_frames must be odd and >= 1, got {s.error_median_frames}"
         )
     joint_ids = np.array([JOINT_INDEX[j] for j in s.boundary_joints])
     cand_joints, valid = _pad(cands)
@@ -687,7 +707,9 @@ def select_and_refine(
     joints = cand_joints[frames, ell]
     bone_err = _angles(ref_dirs[C], cand_dirs[frames, ell])
     owned = owned_frames(spans)
-    bone_err = smooth_errors(bone_err, owned, s.error_smoothing_s * video_fps)
+    bone_err = smooth_errors(
+        bone_err, owned, s.error_smoothing_s * video_fps, s.error_median_frames
+    )
     eps = bone_err.mean(-1)
 
     flags: list[list[str]] = [

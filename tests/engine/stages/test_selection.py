@@ -220,6 +220,12 @@ def test_validation_names_the_parameter():
                 cands, ref, REF_SEGMENTS, np.zeros(5),
                 settings=SelectionSettings(error_smoothing_s=bad),
             )  # fmt: skip
+    for bad in (0, 2):
+        with pytest.raises(InvalidInput, match="error_median_frames"):
+            select_and_refine(
+                cands, ref, REF_SEGMENTS, np.zeros(5),
+                settings=SelectionSettings(error_median_frames=bad),
+            )  # fmt: skip
 
 
 def test_error_smoothing_calms_flicker_but_keeps_the_step_at_a_boundary():
@@ -237,6 +243,19 @@ def test_error_smoothing_calms_flicker_but_keeps_the_step_at_a_boundary():
     flat = np.full((40, 16), 0.2)
     assert smooth_errors(flat, spans, 3.0) == pytest.approx(flat)
     assert smooth_errors(err, spans, 0.0) is err
+
+
+def test_error_median_drops_a_lone_spike_the_gaussian_would_spread():
+    err = np.zeros((30, 16))
+    err[10] = 0.5  # one frame whose selected candidate jumped alone
+    spans = [(0, 29)]
+    spread = smooth_errors(err, spans, sigma_frames=1.5)
+    assert spread[8:13, 0].min() > 0.03  # the spike, spread over its neighbours
+    assert np.all(smooth_errors(err, spans, sigma_frames=1.5, median_frames=3) == 0.0)
+    # a real deviation lasting a few frames survives the median
+    err[10:14] = 0.5
+    kept = smooth_errors(err, spans, sigma_frames=1.5, median_frames=3)
+    assert kept[11:13, 0].min() > 0.35
 
 
 def _reference_and_truth(leg_peak_deg: float = 30.0):
