@@ -94,9 +94,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.extra:
         cases += [synthetic_case(name, seed, args.cache) for name, seed in EXTRA]
     cases = [c for c in cases if args.only in c.name]
+    if args.save is not None:
+        args.save.mkdir(parents=True, exist_ok=True)
     with ProcessPoolExecutor(args.jobs) as pool:
-        if args.save is not None:
-            args.save.mkdir(parents=True, exist_ok=True)
         n = len(cases)
         scores = list(pool.map(score_case, cases, [settings] * n, [args.save] * n))
     keys = (*KEYS, ("misfit", "misfit_fraction"), ("err|misfit", "true_err_misfit_deg"),

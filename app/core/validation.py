@@ -13,6 +13,8 @@ from typing import Any
 
 from app.core.config import Settings
 from engine.errors import InvalidInput
+from engine.reference.domain import parse_domain as engine_parse
+from engine.reference.domain import reference_segments
 
 
 def probe_video(path: Path, settings: Settings) -> dict[str, Any]:
@@ -79,10 +81,6 @@ def parse_domain(raw: bytes) -> dict[str, Any]:
         isinstance(units, int | float) and math.isfinite(units) and units > 0
     ):
         raise InvalidInput("domain 'units_to_m' must be a positive number")
-    try:
-        from engine.reference.domain import parse_domain as engine_parse
-    except ImportError:  # older engine without domain knowledge
-        return data
     engine_parse(engine_domain(data), source="domain configuration")
     return data
 
@@ -97,8 +95,6 @@ def inspect_reference(path: Path, domain: dict[str, Any] | None) -> dict[str, An
     where the coach can fix them, rather than dropped at analysis time.
     """
     from engine.io.bvh import load_reference
-    from engine.reference.domain import parse_domain as engine_parse
-    from engine.reference.domain import reference_segments
 
     domain = domain or {}
     ref = load_reference(path, mapping=domain.get("mapping"), units_to_m=domain.get("units_to_m"))
