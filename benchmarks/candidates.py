@@ -62,6 +62,17 @@ def camera_for(joints: np.ndarray, height_px: float = 200.0) -> Camera:
     return cam.with_(cx=160.0 - c[0], cy=120.0 - c[1])
 
 
+def _setting(settings: object, kv: str) -> dict[str, object]:
+    """``key=value`` as a field of ``settings``, the value parsed as the field's type."""
+    k, v = kv.split("=", 1)
+    kind = type(getattr(settings, k))
+    if kind is bool:  # bool("False") is True
+        if v not in ("True", "False", "true", "false", "1", "0"):
+            raise SystemExit(f"{k} takes True or False, got {v!r}")
+        return {k: v in ("True", "true", "1")}
+    return {k: kind(v)}
+
+
 def _summary(rows: dict[str, list[float]]) -> None:
     for name, v in rows.items():
         v = np.asarray(v)
@@ -214,8 +225,7 @@ def end_to_end(args: argparse.Namespace, settings: CandidateSettings) -> None:
             )  # fmt: skip
     sel_settings = SelectionSettings()
     for kv in args.sel:
-        k, v = kv.split("=")
-        sel_settings = replace(sel_settings, **{k: type(getattr(sel_settings, k))(v)})
+        sel_settings = replace(sel_settings, **_setting(sel_settings, kv))
     segs = _reference_segments(ref, case / "reference.bvh")
     sel = select_and_refine(
         cands, ref.motion.joints, segs, C0.astype(float), settings=sel_settings,
@@ -294,8 +304,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.exact:
         settings = CandidateSettings.exact_body()
     for kv in args.set:
-        k, v = kv.split("=")
-        settings = replace(settings, **{k: type(getattr(settings, k))(v)})
+        settings = replace(settings, **_setting(settings, kv))
     if args.case and args.e2e:
         end_to_end(args, settings)
     elif args.case:

@@ -373,3 +373,51 @@ def test_a_lifted_foot_the_prior_keeps_down_is_flagged_as_misfit() -> None:
     )  # fmt: skip
     out = flag_image_misfit(sel, [f.d_s for f in fcs], SelectionSettings().misfit_margin)
     assert [("image_misfit" in f) for f in out.flags] == [False, True]
+
+
+def test_alternative_local_optima_join_the_candidates() -> None:
+    from engine.stages.candidates import _alternatives, _with_alternatives, generate_candidates
+
+    truth = _posture(-30.0)
+    cam = _camera(truth)
+    rng = np.random.default_rng(5)
+    near = perturb_parts(truth, 1.0, rng)  # under alternative_min_deg from the best
+    far1, far2 = perturb_parts(truth, 25.0, rng), perturb_parts(truth, 25.0, rng)
+    found = [(0.01, truth), (0.02, near), (0.03, far1), (0.05, far2)]
+    s = replace(SMALL, alternatives=1, alternative_min_deg=3.0)
+    alts = _alternatives(found, s)
+    assert len(alts) == 1 and alts[0] is far1  # the nearest optimum is a copy, not an alternative
+    assert len(_alternatives(found, replace(s, alternatives=2))) == 2
+    assert _alternatives(found, replace(s, alternatives=0)) == []
+    assert _alternatives(found[:1], s) == []
+
+    s = replace(s, alternatives=2, alternative_share=0.5)
+    main = generate_candidates(truth, [truth], cam, s)
+    cands = _with_alternatives(main, [far1, far2], [truth], cam, s)
+    assert len(cands) <= s.n_candidates
+    k = min(len(main), 6)  # half the set stays the best's
+    np.testing.assert_array_equal(cands[:k], main[:k])
+    for a in (far1, far2):  # each alternative itself is a candidate
+        assert np.min(np.abs(cands - a).max(axis=(1, 2))) < 1e-9
+
+
+def test_refine_with_a_step_per_part_stops_converged_parts() -> None:
+    from engine.render.capsules import Target
+    from engine.stages.candidates import _refine, _Scorer
+
+    truth = _posture(-30.0)
+    cam = _camera(truth)
+    r = render(truth, SHAPE, cam)
+    start = perturb_parts(truth, 6.0, np.random.default_rng(2))
+    out = {}
+    for per_part in (False, True):
+        s = replace(SMALL, refine_sweeps=24, refine_step0_deg=4.0, refine_per_part=per_part,
+                    lambda_e=1.0)  # fmt: skip
+        scorer = _Scorer(Target.from_masks(r.silhouette, r.edges), SHAPE, cam, start, s)
+        q, d = _refine(scorer, start, cam, s)
+        err = np.linalg.norm(cam.project(q) - cam.project(truth), axis=-1).mean()
+        out[per_part] = (d, err, scorer.n_evals)
+        assert d < float(scorer.full(start[None])[0])
+        assert limits_ok(q)
+    assert out[True][1] < 1.0, out  # mean joint error under a pixel on a 100 px body
+    assert out[True][2] < out[False][2], out  # fewer postures scored
