@@ -245,12 +245,13 @@ class CandidateSettings:
         --exact``: frames stuck in a wrong basin (E_2P > 1.5 px) 16 -> 8, E_2P 1.18 -> 0.91
         px, E_2M 5.1 -> 4.5 px, E_3B 6.00 -> 5.40 deg, 1.63 -> 1.94 s/frame (``--seed 1``:
         16 -> 6, 1.26 -> 1.09 px, 6.20 -> 5.69 deg; one restart: E_2P 1.01, E_3B 5.66;
-        +-15 deg: 0.89, 5.44). :meth:`exact_body` now restarts twice below 0.02 as well,
-        down to 0.01: most synthetic frames sit at d_S 0.005-0.02 however right or wrong
-        their depths, and a restart finds a lower basin often enough (``--exact --frames
-        50``: E_3B 4.26 deg at 1.90 s/frame, 5.27 at 1.42 without restarts). Only worth it where a low d_S
-        means a right posture (exact body images): on videos of people d_S never falls that
-        low, so every frame would pay.
+        +-15 deg: 0.89, 5.44). :meth:`exact_body` now restarts below 0.02 as well, down to
+        0.01: most synthetic frames sit at d_S 0.005-0.02 however right or wrong their
+        depths, and a restart finds a lower basin often enough (``--exact --frames 50``:
+        E_3B 4.26 deg at 1.90 s/frame, 5.27 at 1.42 without restarts). The d_S compared is
+        the refinement's objective (with ``bp_prior_weight``'s prior when that is > 0).
+        Only worth it where a low d_S means a right posture (exact body images): on videos
+        of people d_S never falls that low, so every frame would pay.
     alternatives, alternative_min_deg, alternative_share : int, float, float
         Beyond the thesis; 0 (off) by default, 2 in :meth:`exact_body`. The refinement
         from BP's estimate, from the initial posture and from each restart ends in a local
