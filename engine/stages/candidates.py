@@ -389,7 +389,8 @@ class FrameCandidates:
     ----------
     candidates : ndarray, shape (K, 17, 3)
         World frame, metres. Candidate 0 has the reference's depth orientation; the flips
-        share its projection; the initial postures (the reference turned by T_t' and the
+        share its projection; with ``settings.alternatives``, the runner-up local optima and
+        their flips follow; the initial postures (the reference turned by T_t' and the
         previous frame's best) come last when they respect the joint limits, so the set is
         never worse than the start.
     d_s : ndarray, shape (K,)
