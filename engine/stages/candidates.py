@@ -90,9 +90,10 @@ class CandidateSettings:
     accurate on the synthetic experiment 5.2, where the capsule body matches the image
     exactly; :meth:`exact_body` is the cheaper setting for that case.
     ``NUMBA_NUM_THREADS=1 benchmarks/candidates.py --frames 100`` (E_3B mean deg / E_2P px /
-    E_2M px / s per frame): thesis 6.31 / 1.44 / 8.5 / 5.1, :meth:`exact_body` 4.37 / 0.62 /
-    3.0 / 1.9 (before its restart on every poor fit, per-part refinement steps and
-    alternative optima: 5.40 / 0.91 / 4.5 / 1.9), these defaults 8.14 / 3.00 / 10.9 / 0.6.
+    E_2M px / s per frame): thesis 6.31 / 1.44 / 8.5 / 5.1, :meth:`exact_body` 4.52 / 0.68 /
+    3.6 / 1.5 (``--seed 1`` and ``2``, 50 frames: 4.10 and 3.82 deg; before its restarts
+    on every poor fit, per-part refinement steps, alternative optima and escape prefilter:
+    5.40 / 0.91 / 4.5 / 1.9), these defaults 8.14 / 3.00 / 10.9 / 0.6.
     The defaults keep their priors
     towards the reference because on the public videos the body-model mismatch, not the
     search, limits stage 3: :meth:`exact_body` on P1 with the true C(t') and camera
@@ -135,8 +136,9 @@ class CandidateSettings:
         below ``refine_min_step_deg``. With one shared step (off), the step halves only after
         a sweep in which no part improved: on a pixel-exact d_S some part almost always
         gains a few pixels, so the sweeps run to ``refine_sweeps`` at the first step and
-        every converged part is scored again each sweep. ``--exact --frames 50``: E_3B 4.26
-        deg at 1.90 s/frame with it, 4.50 deg at 2.80 s/frame without.
+        every converged part is scored again each sweep. ``--exact --frames 50`` (before the
+        prefilter and the third restart): E_3B 4.26 deg at 1.90 s/frame with it, 4.50 deg at
+        2.80 s/frame without.
     refine_step0_deg, refine_min_step_deg : float
         First and smallest rotation step of the refinement. Starting coarse (16 deg, halving
         when a sweep finds nothing) lets a limb stuck in a wrong local minimum after BP
@@ -218,6 +220,12 @@ class CandidateSettings:
         it is not worth its cost: the defaults with ``escape_dirs`` 48 and ``refine_alone``
         on ``benchmarks/cases.py`` gave a mean rank of 0.653 against 0.664 (P1 0.62 -> 0.66,
         P2 0.44 -> 0.45, the four synthetic cases 0.01-0.05 lower) in 2.5 times the time.
+    escape_prefilter : int
+        When > 0, of each part's batch of jumps only the ``escape_prefilter`` with the lowest
+        d_A (row spans, no render: 15 us a posture against 190 for d_S) are scored with d_S.
+        0 (off) by default, 16 in :meth:`exact_body`, where the escape was a third of the
+        time: ``--exact --frames 50`` E_3B 4.26 -> 4.25 deg, 1.90 -> 1.37 s/frame (8: 4.24);
+        the time saved pays for a third restart.
     refine_alone : bool
         The refinement also turns each part with children alone, the parts below keeping
         their directions (beyond the thesis; off by default, on in :meth:`exact_body`).
@@ -236,7 +244,7 @@ class CandidateSettings:
         ``benchmarks/cases.py`` mean rank 0.664 -> 0.663, selected 5.356 -> 5.362 deg. The
         synthetic depth-angle floor is not the pixel grid's.
     restarts, restart_ds, restart_deg : int, float, float
-        Beyond the thesis; 0 restarts by default, 2 in :meth:`exact_body`. While the
+        Beyond the thesis; 0 restarts by default, 3 in :meth:`exact_body`. While the
         estimate's d_S is above ``restart_ds``, BP runs again (at most ``restarts`` times)
         from the estimate with every part turned by a random angle in +-``restart_deg``
         about its root joint, then the refinement / escape, and the lower d_S wins. BP's
@@ -248,7 +256,9 @@ class CandidateSettings:
         +-15 deg: 0.89, 5.44). :meth:`exact_body` now restarts below 0.02 as well, down to
         0.01: most synthetic frames sit at d_S 0.005-0.02 however right or wrong their
         depths, and a restart finds a lower basin often enough (``--exact --frames 50``:
-        E_3B 4.26 deg at 1.90 s/frame, 5.27 at 1.42 without restarts). The d_S compared is
+        E_3B 4.26 deg at 1.90 s/frame with two, 5.27 at 1.42 without, before the escape's
+        prefilter; with it, three against two: 4.19 / 4.25 deg, ``--seed 1`` 4.10 / 4.42,
+        1.5 / 1.35 s/frame). The d_S compared is
         the refinement's objective (with ``bp_prior_weight``'s prior when that is > 0).
         Only worth it where a low d_S means a right posture (exact body images): on videos
         of people d_S never falls that low, so every frame would pay.
@@ -260,7 +270,7 @@ class CandidateSettings:
         lowest has not). Up to ``alternatives`` of them, next lowest first and each at
         least ``alternative_min_deg`` from those kept, join the candidates with their own
         flips, sharing ``alternative_share`` of the set. ``--exact --frames 50``: best E_3B
-        4.51 -> 4.26 deg at the same cost.
+        4.51 -> 4.26 deg at the same cost (two restarts, no prefilter).
     """
 
     n_samples: int = 40
@@ -307,6 +317,7 @@ class CandidateSettings:
     restart_ds: float = 0.02
     restart_deg: float = 10.0
     refine_per_part: bool = False
+    escape_prefilter: int = 0
     alternatives: int = 0
     alternative_min_deg: float = 3.0
     alternative_share: float = 0.4
@@ -330,7 +341,7 @@ class CandidateSettings:
         """For images the capsule body matches exactly (the synthetic experiment 5.2).
 
         The defaults' BP with 8 iterations, then the escape, the part-alone refinement with
-        a step per part, up to two restarts of BP while the fit is poor and the alternative
+        a step per part, up to three restarts of BP while the fit is poor and the alternative
         optima as candidates (all beyond the thesis), no prior towards the initial
         posture, d_E on (such images have every part's outline). Not for videos of people:
         there the priors keep the fit near the reference where the body model does not fit
@@ -342,12 +353,13 @@ class CandidateSettings:
             lambda_e=1.0,
             n_iterations=8,
             escape_dirs=48,
+            escape_prefilter=16,
             refine_alone=True,
             refine_step0_deg=4.0,
             refine_per_part=True,
             refine_sweeps=24,
             occluded_tolerance=0.01,
-            restarts=2,
+            restarts=3,
             restart_ds=0.01,
             alternatives=2,
         )
@@ -367,13 +379,24 @@ class CandidateSettings:
             )
         if self.n_candidates < 1:
             raise InvalidInput(f"settings.n_candidates must be >= 1, got {self.n_candidates}")
-        for name in ("escape_dirs", "escape_lookahead", "subpixel_rows", "restarts"):
+        for name in (
+            "escape_dirs", "escape_lookahead", "escape_prefilter", "subpixel_rows", "restarts",
+            "alternatives",
+        ):
             if getattr(self, name) < 0:
                 raise InvalidInput(f"settings.{name} must be >= 0, got {getattr(self, name)}")
         if not (self.restart_ds >= 0.0 and self.restart_deg >= 0.0):  # also refuses NaN
             raise InvalidInput(
                 f"settings.restart_ds and restart_deg must be >= 0, got {self.restart_ds}, "
                 f"{self.restart_deg}"
+            )
+        if not 0.0 < self.alternative_share <= 1.0:
+            raise InvalidInput(
+                f"settings.alternative_share must be in (0, 1], got {self.alternative_share}"
+            )
+        if not self.alternative_min_deg >= 0.0:  # also refuses NaN
+            raise InvalidInput(
+                f"settings.alternative_min_deg must be >= 0, got {self.alternative_min_deg}"
             )
         if not self.occluded_tolerance >= 0.0:  # also refuses NaN
             raise InvalidInput(
@@ -540,6 +563,11 @@ class _Scorer:
         return out + self.ds_w * d_S_batch(
             postures, self.target, self.shape, self.camera, lambda_A=lam_a, lambda_E=lam_e
         )
+
+    def silhouette(self, postures: np.ndarray) -> np.ndarray:
+        """d_A alone of ``postures`` (N, 17, 3), from row spans without rendering, (N,)."""
+        self.n_evals += len(postures)
+        return d_A_batch(postures, self.target, self.shape, self.camera)
 
     def visible_fraction(self, joints: np.ndarray) -> np.ndarray:
         """Fraction of each part's projected area that is front-most in ``joints``, (12,).
@@ -748,13 +776,16 @@ def _escape(
     joints: np.ndarray,
     n_dirs: int,
     parts: Sequence[int] = ALL_PARTS,
+    prefilter: int = 0,
 ) -> tuple[np.ndarray, float]:
     """Let parts stuck in a wrong basin jump (:func:`_moves`); keep each jump that lowers d_S.
 
     Beyond the thesis. BP and the pattern search are local: a forearm that starts on the
     wrong side of the torso, pointing at the camera when it hangs down, or a chest turned
     the wrong way, stays there. Parents first; then the left and right arms, and legs, are
-    swapped (a front and a back view differ by exactly this).
+    swapped (a front and a back view differ by exactly this). With ``prefilter`` > 0, only
+    the ``prefilter`` jumps of each batch with the lowest silhouette term d_A (a twelfth of
+    the cost of a full d_S) are scored with d_S.
     """
     cur = joints.copy()
     best = float(scorer.full(cur[None])[0])
@@ -765,6 +796,8 @@ def _escape(
         nonlocal cur, best
         if not len(batch):
             return
+        if 0 < prefilter < len(batch):
+            batch = batch[np.argsort(scorer.silhouette(batch), kind="stable")[:prefilter]]
         sc = scorer.full(batch)
         k = int(np.argmin(sc))
         if sc[k] < best - 1e-9:
@@ -799,7 +832,7 @@ def _escape_from(
 
     def polish(q: np.ndarray, parts: Sequence[int] = ALL_PARTS) -> None:
         q, d = _refine(scorer, q, camera, s, ref)
-        q2, d2 = _escape(scorer, q, s.escape_dirs, parts=parts)
+        q2, d2 = _escape(scorer, q, s.escape_dirs, parts=parts, prefilter=s.escape_prefilter)
         if d2 < d - 1e-9:
             q, d = _refine(scorer, q2, camera, s, ref)
         found.append((d, q))

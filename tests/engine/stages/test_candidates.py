@@ -181,7 +181,9 @@ def test_estimator_must_be_known():
     "bad",
     [{"escape_dirs": -1}, {"escape_lookahead": -2}, {"occluded_tolerance": -0.1},
      {"occluded_tolerance": float("nan")}, {"restarts": -1}, {"restart_ds": float("nan")},
-     {"restart_deg": -1.0}, {"subpixel_rows": -1}],
+     {"restart_deg": -1.0}, {"subpixel_rows": -1}, {"escape_prefilter": -1},
+     {"alternatives": -1}, {"alternative_share": 0.0}, {"alternative_share": 1.5},
+     {"alternative_min_deg": float("nan")}],
 )  # fmt: skip
 def test_escape_and_occlusion_settings_are_checked(bad: dict) -> None:
     with pytest.raises(InvalidInput, match=next(iter(bad))):
@@ -251,16 +253,18 @@ def test_escape_brings_back_an_arm_started_on_the_other_side() -> None:
     cam = _camera(truth)
     r = render(truth, SHAPE, cam)
     err = {}
-    for dirs in (0, 48):
-        s = replace(SMALL, escape_dirs=dirs, refine_alone=dirs > 0, lambda_e=1.0, prior_weight=0.0)
+    for dirs, prefilter in ((0, 0), (48, 0), (48, 8)):
+        s = replace(SMALL, escape_dirs=dirs, refine_alone=dirs > 0, lambda_e=1.0, prior_weight=0.0,
+                    escape_prefilter=prefilter)  # fmt: skip
         fc = estimate_candidates(
             r.silhouette, r.edges, cam, SHAPE, init, settings=s, rng=np.random.default_rng(0)
         )
         best = fc.candidates[int(np.argmin(fc.d_s))]
-        err[dirs] = np.linalg.norm(cam.project(best) - cam.project(truth), axis=-1).max()
+        err[dirs, prefilter] = np.linalg.norm(cam.project(best) - cam.project(truth), axis=-1).max()
         assert limits_ok(fc.candidates).all()
-    assert err[0] > 10.0, err  # without the escape the wrist stays far off
-    assert err[48] < 3.0, err  # every joint within 3 px on a 100 px body
+    assert err[0, 0] > 10.0, err  # without the escape the wrist stays far off
+    assert err[48, 0] < 3.0, err  # every joint within 3 px on a 100 px body
+    assert err[48, 8] < 3.0, err  # also when only the 8 best jumps by d_A get a full d_S
 
 
 def test_restarts_leave_a_wrong_basin_and_wait_for_a_poor_fit() -> None:
