@@ -582,7 +582,10 @@ def full_counts(
     caps = np.arange(C)
     z = np.full((H, W), _INF)
     label = np.full((H, W), -1, np.int8)
-    cov = np.zeros((H, W), np.uint16)
+    # one pixel of border all round, never covered: the outline test reads the 4-neighbours
+    # without bounds checks, and outside the image nothing is covered, as in the full render
+    cov_b = np.zeros((H + 2, W + 2), np.uint16)
+    cov = cov_b[1 : H + 1, 1 : W + 1]
     body = np.zeros((H, W), np.uint16)
     rlo = np.full(H, W, np.int64)
     rhi = np.full(H, -1, np.int64)
@@ -595,16 +598,21 @@ def full_counts(
         ne = 0
         se = 0.0
         for v in range(vmin, vmax + 1):
+            # row views (profile: the per-pixel 2D indexing of _is_edge was 30 % of the time)
+            lr, br, tr, dr = label[v], body[v], target[v], dt[v]
+            up, cr, dn = cov_b[v], cov_b[v + 1], cov_b[v + 2]
             for u in range(rlo[v], rhi[v] + 1):
-                if label[v, u] < 0:
+                k = lr[u]
+                if k < 0:
                     continue
                 area += 1
-                if target[v, u]:
+                if tr[u]:
                     inter += 1
-                # outside the image nothing is covered, exactly as in the full render
-                if _is_edge(label, cov, body, v, u):
+                bit = np.uint16(1 << k)
+                # _is_edge: a body pixel of its part with a 4-neighbour the part does not cover
+                if br[u] & bit and not (up[u + 1] & dn[u + 1] & cr[u] & cr[u + 2] & bit):
                     ne += 1
-                    se += dt[v, u]
+                    se += dr[u]
         for v in range(vmin, vmax + 1):
             for u in range(rlo[v], rhi[v] + 1):
                 z[v, u] = _INF

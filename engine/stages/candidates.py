@@ -91,7 +91,8 @@ class CandidateSettings:
     exactly; :meth:`exact_body` is the cheaper setting for that case.
     ``NUMBA_NUM_THREADS=1 benchmarks/candidates.py --frames 100`` (E_3B mean deg / E_2P px /
     E_2M px / s per frame): thesis 6.31 / 1.44 / 8.5 / 5.1, :meth:`exact_body` 4.52 / 0.68 /
-    3.6 / 1.5 (``--seed 1`` and ``2``, 50 frames: 4.10 and 3.82 deg; before its restarts
+    3.6 / 1.1 (1.5 before d_S's faster outline test, which the thesis' and the defaults'
+    times predate; ``--seed 1`` and ``2``, 50 frames: 4.10 and 3.82 deg; before its restarts
     on every poor fit, per-part refinement steps, alternative optima and escape prefilter:
     5.40 / 0.91 / 4.5 / 1.9), these defaults 8.14 / 3.00 / 10.9 / 0.6.
     The defaults keep their priors
@@ -222,7 +223,7 @@ class CandidateSettings:
         P2 0.44 -> 0.45, the four synthetic cases 0.01-0.05 lower) in 2.5 times the time.
     escape_prefilter : int
         When > 0, of each part's batch of jumps only the ``escape_prefilter`` with the lowest
-        d_A (row spans, no render: 15 us a posture against 190 for d_S) are scored with d_S.
+        d_A (row spans, no render: 15 us a posture against 145 for d_S) are scored with d_S.
         0 (off) by default, 16 in :meth:`exact_body`, where the escape was a third of the
         time: ``--exact --frames 50`` E_3B 4.26 -> 4.25 deg, 1.90 -> 1.37 s/frame (8: 4.24);
         the time saved pays for a third restart.
