@@ -191,6 +191,9 @@ def test_batch_equals_single_and_reference(rng: np.random.Generator) -> None:
     _, tgt = _target(rng)
     J = np.stack([_posture(rng) for _ in range(6)])
     J[0, :, 0] += 3.0  # one posture entirely off-screen
+    # one across the image's left edge and one across its bottom: outlines at the border
+    J[1, :, 0] -= CAM.project(J[1])[:, 0].mean() / CAM.scale
+    J[2, :, 1] -= (CAM.height - CAM.project(J[2])[:, 1].mean()) / CAM.scale
     sils = silhouettes(J, SHAPE, CAM)
     dA = d_A_batch(J, tgt, SHAPE, CAM)
     dS = d_S_batch(J, tgt, SHAPE, CAM, lambda_A=0.7, lambda_E=1.3)
@@ -203,6 +206,9 @@ def test_batch_equals_single_and_reference(rng: np.random.Generator) -> None:
         )
         assert dS[n] == pytest.approx(ref, abs=1e-9)
     assert dA[0] == 1.0
+    for n in (1, 2):  # really cut by the border
+        uv = CAM.project(J[n])
+        assert uv[:, 0].min() < 0 < uv[:, 0].max() or uv[:, 1].max() > CAM.height > uv[:, 1].min()
 
 
 def test_identity_scores_zero(rng: np.random.Generator) -> None:
