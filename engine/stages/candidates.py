@@ -623,14 +623,13 @@ def _refine(
     n = camera.view_dir
     step0 = np.radians(s.refine_step0_deg if step0_deg is None else step0_deg)
     min_step = np.radians(s.refine_min_step_deg)
-    # one step per part when s.refine_per_part, else one shared step (index 0)
+    # a step per part; without s.refine_per_part they all halve together (one shared step)
     steps = np.full(N_PARTS, step0)
     px = 1.0 / camera.scale
     for _ in range(s.refine_sweeps if sweeps is None else sweeps):
         improved = False
         for p in range(N_PARTS):
-            k_step = p if s.refine_per_part else 0
-            step = steps[k_step]
+            step = steps[p]
             if step < min_step:
                 continue
             d = _part_dir(cur, p)
@@ -654,8 +653,8 @@ def _refine(
             elif s.refine_per_part:
                 steps[p] /= 2.0  # this part is converged at this step
         if not s.refine_per_part and not improved:
-            steps[0] /= 2.0
-        if steps.max() < min_step if s.refine_per_part else steps[0] < min_step:
+            steps /= 2.0
+        if steps.max() < min_step:
             break
     return cur, best
 
