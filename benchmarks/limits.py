@@ -53,7 +53,7 @@ def _timing(prepared, truth: dict, ratio: float) -> str:
     )
 
 
-def _visibility(prepared, truth: dict) -> tuple[str, np.ndarray]:
+def _visibility(prepared, truth: dict) -> str:
     from engine.measures import d_B
 
     top = len(prepared.reference_joints) - 1
@@ -69,7 +69,7 @@ def _visibility(prepared, truth: dict) -> tuple[str, np.ndarray]:
         f"visibility: true deviation {e3.mean():.2f} deg moves the joints {moved.mean():.2f} px "
         f"(hips together); {per_deg:.2f} px per deg where it exceeds 2 deg; body height "
         f"{np.ptp(g[..., 1], axis=-1).mean():.0f} px"
-    ), e3
+    )
 
 
 def _own_minimum(prepared, truth: dict, every: int) -> str:
@@ -110,7 +110,7 @@ def main(argv: list[str] | None = None) -> int:
         ratio = truth["reference_fps"] / truth["fps"]
         print(case.name)
         print("  " + _timing(prepared, truth, ratio))
-        print("  " + _visibility(prepared, truth)[0])
+        print("  " + _visibility(prepared, truth))
         print("  " + _own_minimum(prepared, truth, args.every), flush=True)
     return 0
 
