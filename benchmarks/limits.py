@@ -31,18 +31,24 @@ sys.path.insert(0, str(REPO))
 SHARED = REPO.parent / "shared"
 
 
+def _true_C(prepared, truth: dict) -> tuple[np.ndarray, np.ndarray]:
+    """The truth's C(t'), (T',) fractional, and rounded to a reference frame index (T',)."""
+    C = np.array([f["reference_frame"] for f in truth["frames"]], float)
+    top = len(prepared.reference_joints) - 1
+    return C, np.clip(np.round(C), 0, top).astype(int)
+
+
 def _timing(prepared, truth: dict, ratio: float) -> str:
     from engine.render.capsules import Target, d_S_batch
 
-    C_true = np.array([f["reference_frame"] for f in truth["frames"]], float)
-    top = len(prepared.reference_joints) - 1
+    C_true, idx = _true_C(prepared, truth)
     off = np.flatnonzero(np.abs(prepared.C - C_true) / ratio > 1.0)
     if len(off) == 0:
         return "timing: stage 2 is within one video frame of the truth everywhere"
     ours, theirs = [], []
     for t in off:
         target = Target.from_masks(prepared.silhouettes[t], prepared.edges[t])
-        both = prepared.reference_joints[[prepared.C[t], min(int(round(C_true[t])), top)]]
+        both = prepared.reference_joints[[prepared.C[t], idx[t]]]
         d = d_S_batch(both, target, prepared.shape, prepared.camera, lambda_E=0.0)
         ours.append(d[0])
         theirs.append(d[1])
@@ -56,9 +62,7 @@ def _timing(prepared, truth: dict, ratio: float) -> str:
 def _visibility(prepared, truth: dict) -> str:
     from engine.measures import d_B
 
-    top = len(prepared.reference_joints) - 1
-    C_true = np.array([f["reference_frame"] for f in truth["frames"]], float)
-    ref = prepared.reference_joints[np.clip(np.round(C_true), 0, top).astype(int)]
+    ref = prepared.reference_joints[_true_C(prepared, truth)[1]]
     gt = np.array([f["joints_3d"] for f in truth["frames"]], float)
     e3 = np.degrees(d_B(ref, gt))
     p, g = prepared.camera.project(ref), prepared.camera.project(gt)
