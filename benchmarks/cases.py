@@ -36,6 +36,14 @@ EXTRA = (("64_17", 11), ("64_24", 12), ("64_29", 13), ("64_30", 14))
 DEMO = ("64_29", 7, ("--fps", "15", "--n-wrong", "1", "--error-deg", "25"))
 
 
+# what the 3D colours, the segment cards and the numbers tell a coach (issue 20's aims)
+COACH_KEYS = (
+    ("bnd.max", "boundary_err_max_frames"), ("E2P%", "joint_2d_err_pct_height"),
+    ("bone.rk", "bone_rank_corr"), ("mag", "error_magnitude_ratio"),
+    ("seg.rk", "segment_error_rank_corr"),
+)  # fmt: skip
+
+
 def synthetic_case(name: str, seed: int, cache: Path, extra: tuple[str, ...] = ()) -> Path:
     """``coach synth REF --seed SEED --max-frames 160 [EXTRA]`` into ``cache`` (once)."""
     out = cache / (f"demo_{name}_{seed}" if extra else f"syn_{name}_{seed}")
@@ -99,8 +107,8 @@ def main(argv: list[str] | None = None) -> int:
     with ProcessPoolExecutor(args.jobs) as pool:
         n = len(cases)
         scores = list(pool.map(score_case, cases, [settings] * n, [args.save] * n))
-    keys = (*KEYS, ("misfit", "misfit_fraction"), ("err|misfit", "true_err_misfit_deg"),
-            ("err|ok", "true_err_ok_deg"))  # fmt: skip
+    keys = (*KEYS, *COACH_KEYS, ("misfit", "misfit_fraction"),
+            ("err|misfit", "true_err_misfit_deg"), ("err|ok", "true_err_ok_deg"))  # fmt: skip
     print(f"{'case':24s}" + "".join(f"{k:>11s}" for k, _ in keys))
     for case, s in zip(cases, scores, strict=True):
         print(f"{case.name[:24]:24s}" + "".join(f"{s.get(k, float('nan')):11.3f}" for _, k in keys))

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from engine.body.shapes import BodyShape
-from engine.errors import InvalidInput
+from engine.errors import InvalidInput, RegistrationFailed
 from engine.io.stagefiles import load_arrays, pack_masks, save_arrays, unpack_masks
 from engine.render.camera import Camera
 from engine.settings import Settings
@@ -70,6 +70,11 @@ class Prepared:
     flags : tuple of tuple of str
         Stage-0 quality flags per video frame.
     timing_s : dict
+    keypoints : ndarray, shape (T', 17, 2), or None
+        The pose model's 2D keypoints (working pixels; NaN where none), when perception ran.
+    keypoint_confidence : ndarray, shape (T', 17), or None
+    perception_model : str
+        Name and version of the pose model ("" when none ran).
     """
 
     reference_path: str
@@ -88,6 +93,9 @@ class Prepared:
     segments: Segments
     flags: tuple[tuple[str, ...], ...]
     timing_s: dict
+    keypoints: np.ndarray | None = None
+    keypoint_confidence: np.ndarray | None = None
+    perception_model: str = ""
 
     @property
     def n_frames(self) -> int:
@@ -123,6 +131,9 @@ class Prepared:
             "radii": self.shape.radii, "silhouettes": sil, "edges": edg, "C": self.C,
             "rotations": self.rotations,
         }  # fmt: skip
+        if self.keypoints is not None and self.keypoint_confidence is not None:
+            arrays["keypoints"] = self.keypoints
+            arrays["keypoint_confidence"] = self.keypoint_confidence
         meta = {
             "reference_path": self.reference_path, "video_path": self.video_path,
             "reference_name": self.reference_name, "reference_fps": self.reference_fps,
@@ -131,6 +142,7 @@ class Prepared:
             "segments": {"starts": list(self.segments.starts), "end": self.segments.end,
                          "names": list(self.segments.names)},
             "flags": [list(f) for f in self.flags], "timing_s": self.timing_s,
+            "perception_model": self.perception_model,
         }  # fmt: skip
         save_arrays(path, arrays, meta)
 
@@ -150,7 +162,16 @@ class Prepared:
             edges=unpack_masks(a["edges"], shape), C=a["C"], rotations=a["rotations"],
             segments=Segments(tuple(seg["starts"]), int(seg["end"]), tuple(seg["names"])),
             flags=tuple(tuple(f) for f in m["flags"]), timing_s=m["timing_s"],
+            keypoints=a.get("keypoints"), keypoint_confidence=a.get("keypoint_confidence"),
+            perception_model=str(m.get("perception_model", "")),
         )  # fmt: skip
+
+    def frame_keypoints(self, frames: range) -> tuple[np.ndarray, np.ndarray] | None:
+        """Keypoints (N, 17, 2) and confidences (N, 17) of ``frames``; None without them."""
+        if self.keypoints is None or self.keypoint_confidence is None:
+            return None
+        idx = np.asarray(frames)
+        return self.keypoints[idx], self.keypoint_confidence[idx]
 
 
 @dataclass(frozen=True)
@@ -240,10 +261,20 @@ def prepare(
         offset = a
     segments = _reference_segments(reference, reference_path)
     load_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    perception = None
+    if s.perception.enabled:
+        from engine.stages.perception import MediaPipePose, perceive
+
+        model = MediaPipePose(min_detection_confidence=s.perception.min_detection_confidence)
+        perception = perceive(video.frames, model, on_progress=on_progress)
+    perceive_s = time.perf_counter() - t0
     r = run_stages_0_2_full(
-        reference, video, s.foreground, s.calibration, s.alignment, on_progress=on_progress
-    )
+        reference, video, s.foreground, s.calibration, s.alignment, perception=perception,
+        on_progress=on_progress,
+    )  # fmt: skip
     fg, camera, aligned, timing = r.foreground, r.camera, r.alignment, r.timing_s
+    check_person_found(fg.flags, perception, s.perception.min_detected_fraction)
     h, w = video.frames.shape[1:3]
     return Prepared(
         reference_path=str(reference_path), video_path=str(video_path),
@@ -257,8 +288,39 @@ def prepare(
         camera=camera, silhouettes=fg.silhouettes, edges=fg.edges,
         C=np.asarray(aligned.C, dtype=int), rotations=np.asarray(aligned.rotations, float),
         segments=segments, flags=tuple(tuple(f) for f in fg.flags),
-        timing_s={"load": load_s, **{k: float(v) for k, v in timing.items()}},
+        timing_s={"load": load_s, "perception": perceive_s,
+                  **{k: float(v) for k, v in timing.items()}},
+        keypoints=None if perception is None else perception.keypoints,
+        keypoint_confidence=None if perception is None else perception.confidence,
+        perception_model="" if perception is None else perception.model,
     )  # fmt: skip
+
+
+def check_person_found(
+    flags: Sequence[Sequence[str]], perception: Any, min_fraction: float
+) -> None:
+    """Refuse a video where nobody is found, rather than fit the reference to nothing.
+
+    A frame shows a person when the pose model detected one there or stage 0's region is not
+    flagged ``no_person`` (a pose model trained on photographs may miss a rendered or
+    unusual figure that the background difference still finds; what is then found but is not
+    a body ends ``poor_fit``, :func:`assess_fit`).
+
+    Raises
+    ------
+    RegistrationFailed
+        Fewer than ``min_fraction`` of the frames show a person.
+    """
+    seen = np.array(["no_person" not in f for f in flags], bool)
+    if perception is not None:
+        seen |= np.asarray(perception.detected, bool)
+    found = float(seen.mean())
+    if found < min_fraction:
+        raise RegistrationFailed(
+            f"We could not find a person in this video (only {100 * found:.0f} % of the "
+            "frames show one). Film the whole body, from head to feet, in good light, "
+            "standing out from the background."
+        )
 
 
 def candidates(
@@ -285,7 +347,8 @@ def candidates(
     out = estimate_candidates_chunk(
         prepared.silhouettes[idx], prepared.edges[idx], prepared.camera, prepared.shape,
         prepared.initial_postures(frames), settings=s.candidates,
-        rng=frame_rngs(s.seed, frames), on_progress=on_progress,
+        rng=frame_rngs(s.seed, frames), keypoints=prepared.frame_keypoints(frames),
+        on_progress=on_progress,
     )  # fmt: skip
     return CandidateChunk(
         frames=idx, candidates=[f.candidates for f in out], d_s=[f.d_s for f in out],
@@ -352,7 +415,53 @@ def select(
         video_frame_offset=int(v.get("offset", 0)),
     )  # fmt: skip
     add_image_best(doc, cands, d_s, camera)
+    chosen = np.stack([c[int(k)] for c, k in zip(cands, selection.selected, strict=True)])
+    assess_fit(doc, chosen, prepared, sel_settings.poor_fit_region)
     return doc
+
+
+def assess_fit(doc: dict, postures: np.ndarray, prepared: Prepared, threshold: float) -> None:
+    """How well the reported postures explain the video; ``poor_fit`` when they do not.
+
+    Per frame, 1 - Dice overlap (d_A, thesis eq. 4.1) of the reported posture's capsule
+    body with stage 0's body region. Where the region is the performer, this stays near
+    0.1-0.2 (the capsules are not clothes); where stage 0 could not separate the performer
+    from the background, the region is a blob of wall and no posture explains it. When the
+    median over frames exceeds ``threshold``, the result's status becomes ``poor_fit`` with
+    a message saying why, and the numbers should not be read as the performer's.
+
+    Parameters
+    ----------
+    doc : dict
+        The result document, changed in place: ``summary.fit`` and, if poor, the status.
+    postures : ndarray, shape (T', 17, 3)
+        The reported (selected) postures.
+    prepared : Prepared
+    threshold : float
+    """
+    from engine.render.capsules import Target, d_A_batch
+
+    d_a = np.array([
+        d_A_batch(p[None], Target.from_masks(sil, edg), prepared.shape, prepared.camera)[0]
+        for p, sil, edg in zip(postures, prepared.silhouettes, prepared.edges, strict=True)
+    ])  # fmt: skip
+    median = float(np.median(d_a))
+    summary = doc["summary"]
+    summary["fit"] = {
+        "region_mismatch_median": round(median, 4),
+        "region_mismatch_per_frame": np.round(d_a, 4).tolist(),
+        "poor_frames": int(np.count_nonzero(d_a > threshold)),
+    }  # fmt: skip
+    if median > threshold:
+        share = 100 * float(np.mean(d_a > threshold))
+        summary["status"] = "poor_fit"
+        summary["messages"] = [
+            "We could not separate you from the background well enough to measure your "
+            f"posture (the body found in the video matches no posture in {share:.0f} % "
+            "of the frames). Film in front of a plain wall, in clothes that differ from it, "
+            "with the whole body in view and the camera still.",
+            *summary["messages"],
+        ]
 
 
 def add_image_best(

@@ -18,6 +18,7 @@ from engine.stages.alignment import AlignmentSettings
 from engine.stages.calibration import CalibrationSettings
 from engine.stages.candidates import CandidateSettings
 from engine.stages.foreground import ForegroundSettings
+from engine.stages.perception import PerceptionSettings
 from engine.stages.selection import SelectionSettings
 
 
@@ -34,7 +35,7 @@ class Settings:
         Seed of every random choice (stage 3 sampling), so an analysis can be repeated.
     chunk_frames : int
         Video frames per stage-3 chunk (the unit fanned out across workers).
-    video, foreground, calibration, alignment, candidates, selection
+    video, perception, foreground, calibration, alignment, candidates, selection
         Each stage's own settings.
     """
 
@@ -42,6 +43,7 @@ class Settings:
     seed: int = 0
     chunk_frames: int = 16
     video: VideoLimits = field(default_factory=VideoLimits)
+    perception: PerceptionSettings = field(default_factory=PerceptionSettings)
     foreground: ForegroundSettings = field(default_factory=ForegroundSettings)
     calibration: CalibrationSettings = field(default_factory=CalibrationSettings)
     alignment: AlignmentSettings = field(default_factory=AlignmentSettings)
@@ -52,7 +54,7 @@ class Settings:
     def from_dict(cls, d: dict[str, Any] | None) -> Settings:
         """Settings from a nested dict, e.g. ``{"candidates": {"n_samples": 20}}``.
 
-        A ``"preset"`` key (``"default"`` or ``"fast"``) picks the starting point.
+        A ``"preset"`` key (``"default"``, ``"fast"`` or ``"thesis"``) picks the starting point.
 
         Raises
         ------
@@ -97,8 +99,16 @@ def _merge(obj: Any, changes: dict[str, Any], where: str) -> Any:
 #: between the legs unseen and the legs merge into one block; on the 160x120 test case
 #: (tests/engine/test_pipeline.py) stage 2's C was then 16 reference frames off instead of
 #: 1.2, for 0.2 s saved.
+#: "thesis" is the thesis' own evidence only: no learned mask or keypoints in any stage.
 PRESETS: dict[str, Settings] = {
     "default": Settings(),
+    "thesis": Settings(
+        perception=PerceptionSettings(enabled=False),
+        foreground=ForegroundSettings(fuse_learned=False),
+        calibration=CalibrationSettings(keypoint_weight=0.0),
+        alignment=AlignmentSettings(keypoint_weight=0.0),
+        candidates=CandidateSettings(keypoint_weight=0.0),
+    ),
     "fast": Settings(
         candidates=CandidateSettings(n_samples=16, n_iterations=5, refine_sweeps=2,
                                      refine_step0_deg=2.0,

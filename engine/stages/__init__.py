@@ -30,6 +30,7 @@ from engine.stages.foreground import (
     extract_foreground,
     outline,
 )
+from engine.stages.perception import Perception
 
 __all__ = [
     "AlignmentResult", "AlignmentSettings", "CalibrationSettings", "ForegroundResult",
@@ -100,6 +101,7 @@ def run_stages_0_2_full(
     alignment: AlignmentSettings = AlignmentSettings(),
     *,
     align_with_fitted_shape: bool = False,
+    perception: Perception | None = None,
     on_progress: Callable[[str, float], None] | None = None,
 ) -> Stages02:
     """Stages 0-2 of the thesis (4.1, 4.2, 4.5) on a loaded reference and video.
@@ -150,15 +152,19 @@ def run_stages_0_2_full(
         )
     timing = {}
     t0 = time.perf_counter()
-    fg = extract_foreground(video.frames, foreground, on_progress=on_progress)
+    fg = extract_foreground(video.frames, foreground,
+                            learned=None if perception is None else perception.mask,
+                            on_progress=on_progress)  # fmt: skip
     timing["foreground"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     k = calibration.video_frame
     # the outline only: interior image edges (ForegroundSettings.interior_edges) are for
     # stage 3's per-part fit; the calibration's capsule body has no clothing seams
     edges_k = outline(fg.silhouettes[k], fg.skin[k])
+    kp_k, facing = _calibration_keypoints(perception, k, foreground.learned_max_gap)
     camera, report = calibrate(joints[c0], reference.shape, fg.silhouettes[k], edges_k,
-                               calibration, on_progress=on_progress)  # fmt: skip
+                               calibration, keypoints=kp_k, facing=facing,
+                               on_progress=on_progress)  # fmt: skip
     cameras = [camera]
     alt = None
     if calibration.check_mirror:
@@ -166,9 +172,10 @@ def run_stages_0_2_full(
     if alt is not None:
         mirrored = dataclasses.replace(calibration, azimuths_deg=(alt,))
         cameras.append(calibrate(joints[c0], reference.shape, fg.silhouettes[k], edges_k,
-                                 mirrored)[0])  # fmt: skip
+                                 mirrored, keypoints=kp_k)[0])  # fmt: skip
     timing["calibration"] = time.perf_counter() - t0
     t0 = time.perf_counter()
+    kp_all = None if perception is None else (perception.keypoints, perception.confidence)
     results = []
     passes = len(cameras) + int(alignment.realign and calibration.refine_frames > 0)
     for i, cam in enumerate(cameras):
@@ -177,14 +184,14 @@ def run_stages_0_2_full(
             shape, _ = fit_body_shape(joints[c0], reference.shape, cam, fg.silhouettes[k])
         progress = None if on_progress is None else _share(on_progress, i, passes)
         aligned = align(joints, shape, cam, fg.silhouettes, fg.skin, alignment, start=c0,
-                        on_progress=progress)  # fmt: skip
+                        keypoints=kp_all, on_progress=progress)  # fmt: skip
         results.append((aligned.E_C, i, cam, aligned))
     # the camera whose view explains the whole video best (CalibrationSettings.check_mirror)
     _, _, camera, result = min(results, key=lambda r: (r[0], r[1]))
     timing["alignment"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     if calibration.refine_frames > 0:
-        camera = _refine_camera(camera, reference, fg, result, calibration)
+        camera = _refine_camera(camera, reference, fg, result, calibration, kp_all)
     factors: dict[str, float] = {}
     shape = reference.shape
     if calibration.fit_width:  # the performer's widths, for the final camera
@@ -194,7 +201,7 @@ def run_stages_0_2_full(
         t0 = time.perf_counter()
         progress = None if on_progress is None else _share(on_progress, passes - 1, passes)
         result = align(joints, shape, camera, fg.silhouettes, fg.skin, alignment, start=c0,
-                       on_progress=progress)  # fmt: skip
+                       keypoints=kp_all, on_progress=progress)  # fmt: skip
         timing["alignment"] += time.perf_counter() - t0
     views = {round(float(np.degrees(r[2].azimuth)), 6): float(r[0]) for r in results}
     return Stages02(fg, camera, shape, factors, result, timing, views)
@@ -206,6 +213,7 @@ def _refine_camera(
     fg: ForegroundResult,
     aligned: AlignmentResult,
     calibration: CalibrationSettings,
+    keypoints: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Camera:
     """The camera polished on frames spread over the video.
 
@@ -218,10 +226,33 @@ def _refine_camera(
     hip = ref[:, :1]
     posed = np.einsum("nij,nkj->nki", aligned.rotations[idx], ref - hip) + hip
     outlines = np.array([outline(fg.silhouettes[i], fg.skin[i]) for i in idx])
+    kp = None if keypoints is None else (keypoints[0][idx], keypoints[1][idx])
     camera, _ = refine_on_frames(
-        camera, posed, reference.shape, fg.silhouettes[idx], outlines, calibration
+        camera, posed, reference.shape, fg.silhouettes[idx], outlines, calibration, keypoints=kp
     )
     return camera
+
+
+def _calibration_keypoints(
+    perception: Perception | None, k: int, max_gap: int
+) -> tuple[tuple[np.ndarray, np.ndarray] | None, int]:
+    """Keypoints and confidences (17, 2), (17,) for calibration frame k, and the facing.
+
+    Where the pose model lost the person in frame k, the nearest frame that has him within
+    ``max_gap`` frames stands in (a performer starts still, in the reference's first
+    posture). The facing is the majority of the frames up to ``max_gap`` after k.
+    """
+    if perception is None:
+        return None, 0
+    found = np.flatnonzero(perception.detected)
+    if found.size == 0:
+        return None, 0
+    j = int(found[np.argmin(np.abs(found - k))])
+    if abs(j - k) > max_gap:
+        return None, 0
+    window = perception.facing[k : k + max_gap + 1][perception.detected[k : k + max_gap + 1]]
+    facing = int(np.sign(window.sum())) if window.size else 0
+    return (perception.keypoints[j], perception.confidence[j]), facing
 
 
 def _share(

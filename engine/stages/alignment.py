@@ -38,10 +38,11 @@ import numpy as np
 from engine.body.kinematics import rotation_about_axis
 from engine.body.shapes import BodyShape
 from engine.errors import InvalidInput
-from engine.measures import LAMBDA_A, LAMBDA_E
+from engine.measures import LAMBDA_A, LAMBDA_E, d_K
 from engine.render import capsules
 from engine.render.camera import Camera
 from engine.stages.foreground import contour
+from engine.stages.perception import MIRROR
 
 ProgressFn = Callable[[str, float], None]
 
@@ -96,6 +97,12 @@ class AlignmentSettings:
         Thesis: C strictly increasing. False (the default) allows a reference frame to
         repeat at the price of the step cost; when True and the corridor admits no strictly
         increasing path, the DP falls back to repeats and says so in ``relaxed``.
+    keypoint_weight, keypoint_tau : float
+        With 2D keypoints (:mod:`engine.stages.perception`), d(t', t) = min_s d_S +
+        ``keypoint_weight`` d_K (:func:`engine.measures.d_K`, saturating at ``keypoint_tau``
+        of the body's height in the image; swap-invariant, confidence-weighted). Beyond the
+        thesis: a silhouette hardly tells the frames of a slow passage apart, and a posture
+        deviation fits an earlier or later reference frame, while the limbs' keypoints move.
     """
 
     k: float = 10.0
@@ -114,6 +121,8 @@ class AlignmentSettings:
     one_to_one: bool = False
     skin_edges: bool = False
     realign: bool = True
+    keypoint_weight: float = 1.0
+    keypoint_tau: float = 0.1
 
 
 @dataclass(frozen=True)
@@ -373,6 +382,7 @@ def cost_entries(
     measure: str = "S",
     samples: np.ndarray | None = None,
     keep: int = 0,
+    keypoints: tuple[np.ndarray, np.ndarray, float] | None = None,
     on_progress: Callable[[float], None] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """d(t', t) = min_s d(P(T_s(B_t)), S'_t') for a set of (t', t) (thesis eq. 4.8-4.9).
@@ -390,6 +400,9 @@ def cost_entries(
         The rotation samples to try per entry (all S by default).
     keep : int
         When > 0, ``best`` holds the ``keep`` best samples per entry, best first.
+    keypoints : (ndarray (T', 17, 2), ndarray (T', 17), float), optional
+        Keypoints in ``camera``'s pixels, their confidences, and d_K's saturation distance
+        in pixels: ``settings.keypoint_weight`` d_K joins the measure.
 
     Returns
     -------
@@ -414,6 +427,11 @@ def cost_entries(
         else:
             d = capsules.d_S_batch(j, targets[tv], shape, camera, lambda_A=settings.lambda_A,
                                    lambda_E=settings.lambda_E)  # fmt: skip
+        if keypoints is not None and settings.keypoint_weight > 0:
+            kp, conf, tau_px = keypoints
+            d = d + settings.keypoint_weight * d_K(
+                camera.project(j), kp[tv], conf[tv], tau_px=tau_px, mirror=MIRROR
+            )
         d = d.reshape(si.shape)
         order = np.argsort(d, axis=0, kind="stable")[: max(keep, 1)]
         cols = np.arange(ts.size)
@@ -463,6 +481,7 @@ def align(
     settings: AlignmentSettings = AlignmentSettings(),
     *,
     start: int = 0,
+    keypoints: tuple[np.ndarray, np.ndarray] | None = None,
     on_progress: ProgressFn | None = None,
 ) -> AlignmentResult:
     """Approximate temporal correspondence and global rotations (thesis 4.5).
@@ -481,6 +500,9 @@ def align(
     settings : AlignmentSettings
     start : int
         C(0): the reference frame the first video frame shows.
+    keypoints : (ndarray (T', 17, 2), ndarray (T', 17)), optional
+        2D keypoints (the silhouettes' pixels) and confidences; see
+        ``settings.keypoint_weight``.
     on_progress : callable(stage, fraction), optional
         Called with ``"alignment"``.
 
@@ -515,6 +537,11 @@ def align(
     height = min(settings.compare_height, camera.height)
     cam = half_camera(camera, height)
     targets = make_targets(sil, skin if settings.skin_edges else None, height)
+    kp = None
+    if keypoints is not None and settings.keypoint_weight > 0:
+        f = height / camera.height
+        tau_px = settings.keypoint_tau * cam.scale * max(float(np.ptp(ref[start, :, 1])), 0.3)
+        kp = ((np.asarray(keypoints[0]) + 0.5) * f - 0.5, np.asarray(keypoints[1]), tau_px)
     R = rotation_samples(settings.yaw_deg, settings.tilt_deg)
     posed = rotate_about_hip(ref, R)
     timing["prepare"] = time.perf_counter() - t0
@@ -533,7 +560,7 @@ def align(
         n_keep = settings.fine_samples if 0 < settings.fine_samples < len(R) else len(R)
         c_cost, c_best = cost_entries(
             posed, targets, shape, cam, coarse_entries, settings, measure="A", keep=n_keep,
-            on_progress=lambda f: report("alignment", 0.5 * f),
+            keypoints=kp, on_progress=lambda f: report("alignment", 0.5 * f),
         )  # fmt: skip
         timing["coarse"] = time.perf_counter() - t0
         # the same DP on the coarse columns (steps counted in coarse columns)
@@ -553,11 +580,11 @@ def align(
         t0 = time.perf_counter()
         cost, best = cost_entries(
             posed, targets, shape, cam, fine, settings, measure="S", samples=samples,
-            on_progress=lambda f: report("alignment", 0.5 + 0.5 * f),
+            keypoints=kp, on_progress=lambda f: report("alignment", 0.5 + 0.5 * f),
         )  # fmt: skip
         timing["fine"] = time.perf_counter() - t0
     else:
-        cost, best = cost_entries(posed, targets, shape, cam, band, settings,
+        cost, best = cost_entries(posed, targets, shape, cam, band, settings, keypoints=kp,
                                   on_progress=lambda f: report("alignment", f))  # fmt: skip
         timing["fine"] = time.perf_counter() - t0
     t0 = time.perf_counter()

@@ -87,6 +87,18 @@ class CalibrationSettings:
         -4.2 / -6.8 / 1.5; ``coach synth 64_30 --seed 4`` +1.4 / +1.5 / 0.1 -> +0.4 / 0.0 /
         0.1; P1 and three other synthetic cases unchanged. Stages 3-4 see the new camera;
         stage 2 keeps the one it ran with.
+    keypoint_weight : float
+        With 2D keypoints (:mod:`engine.stages.perception`), each azimuth's camera starts
+        from the keypoints instead of PCA (:func:`keypoint_camera`: scale, centre and roll
+        from the hips, shoulders, knees, ankles...), and every fit minimises d_S +
+        ``keypoint_weight`` d_K (:func:`engine.measures.d_K`). Beyond the thesis: a body
+        region that lacks the legs (a wall of the trousers' colour) gave a camera a third too
+        small; the keypoints do not depend on the background.
+    keypoint_tau : float
+        d_K's saturation distance as a fraction of the body's height in the image.
+    facing_penalty : float
+        Added to the score of an azimuth that contradicts the facing the pose model saw
+        (the face seen: not a view from behind; the back of the head: not one from the front).
     """
 
     azimuths_deg: tuple[float, ...] = tuple(float(a) for a in range(-180, 180, 15))
@@ -100,6 +112,9 @@ class CalibrationSettings:
     check_mirror: bool = True
     refine_top: int = 3
     refine_frames: int = 15
+    keypoint_weight: float = 1.0
+    keypoint_tau: float = 0.1
+    facing_penalty: float = 0.1
 
 
 @dataclass(frozen=True)
@@ -202,22 +217,103 @@ def pca_camera(
     )  # fmt: skip
 
 
+def keypoint_camera(
+    joints: np.ndarray,
+    keypoints: np.ndarray,
+    confidence: np.ndarray,
+    *,
+    azimuth: float,
+    width: int,
+    height: int,
+) -> Camera:
+    """Camera at one azimuth that best puts the posture's joints on 2D keypoints.
+
+    The weighted least-squares similarity (scale, in-plane angle, translation) from the
+    posture's orthographic view at ``azimuth`` to the keypoints, in closed form (Umeyama
+    1991), on the labels as given and on their mirror (a pose model swaps left and right);
+    the better fit wins. Beyond the thesis' PCA (4.2), which only sees the region's axes.
+
+    Parameters
+    ----------
+    joints : ndarray, shape (17, 3)
+    keypoints : ndarray, shape (17, 2)
+        NaN where there is none.
+    confidence : ndarray, shape (17,)
+    azimuth : float
+        Radians.
+    width, height : int
+
+    Raises
+    ------
+    InvalidInput
+        Fewer than three keypoints carry weight.
+    """
+    from engine.stages.perception import MIRROR
+
+    ok = np.isfinite(keypoints).all(-1) & (confidence > 0)
+    if ok.sum() < 3:
+        raise InvalidInput("at least three 2D keypoints are needed to place the camera")
+    base = Camera(scale=1.0, azimuth=azimuth, width=width, height=height)
+    p = base.project(joints)
+    fits = []
+    for idx in (np.arange(len(joints)), MIRROR):
+        k, w = np.nan_to_num(keypoints[idx]), np.where(ok[idx], confidence[idx], 0.0)
+        pm, km = (w[:, None] * p).sum(0) / w.sum(), (w[:, None] * k).sum(0) / w.sum()
+        a, b = p - pm, k - km
+        h00 = (w * a[:, 0] * b[:, 0]).sum() + (w * a[:, 1] * b[:, 1]).sum()
+        h01 = (w * a[:, 0] * b[:, 1]).sum() - (w * a[:, 1] * b[:, 0]).sum()
+        theta = float(np.arctan2(h01, h00))
+        scale = float(np.hypot(h00, h01) / max((w * (a**2).sum(1)).sum(), 1e-12))
+        c, si = np.cos(theta), np.sin(theta)
+        t = km - scale * (np.array([[c, -si], [si, c]]) @ pm)
+        r = scale * (a @ np.array([[c, si], [-si, c]])) - b
+        fits.append(((w * (r**2).sum(1)).sum(), scale, theta, t))
+    _, scale, theta, t = min(fits, key=lambda f: f[0])
+    return Camera(scale=max(scale, 1e-6), theta_z=theta, cx=float(t[0]), cy=float(t[1]),
+                  azimuth=azimuth, width=width, height=height)  # fmt: skip
+
+
+def _keypoint_cost(
+    joints: np.ndarray, keypoints: np.ndarray, confidence: np.ndarray, cam: Camera, tau: float
+) -> float:
+    """d_K of one posture (17, 3) at a camera, saturating at ``tau`` of its height."""
+    from engine.measures import d_K
+    from engine.stages.perception import MIRROR
+
+    tau_px = tau * cam.scale * max(float(np.ptp(joints[:, 1])), 0.3)
+    return float(d_K(cam.project(joints)[None], keypoints, confidence, tau_px=tau_px,
+                     mirror=MIRROR)[0])  # fmt: skip
+
+
 def _refine(
     joints: np.ndarray,
     shape: BodyShape,
     target: capsules.Target,
     cam: Camera,
     s: CalibrationSettings,
+    keypoints: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[Camera, float]:
-    """Coordinate search on scale and position minimising d_S (a few dozen renders)."""
+    """Coordinate search on scale and position minimising d_S (+ the keypoint term)."""
 
     def score(c: Camera) -> float:
-        return float(
+        d = float(
             capsules.d_S_batch(joints[None], target, shape, c, lambda_A=s.lambda_A,
                                lambda_E=s.lambda_E)[0]
         )  # fmt: skip
+        if keypoints is not None and s.keypoint_weight > 0:
+            d += s.keypoint_weight * _keypoint_cost(joints, *keypoints, c, s.keypoint_tau)
+        return d
 
     return _coordinate_search(cam, score)
+
+
+def _facing_cost(azimuth_deg: float, facing: int, penalty: float) -> float:
+    """``penalty`` when a view at ``azimuth_deg`` contradicts the facing (+1 front, -1 back);
+    views within 15 deg of a side view contradict neither."""
+    off = abs((azimuth_deg + 180.0) % 360.0 - 180.0)  # 0 front, 180 back
+    if (facing > 0 and off > 105.0) or (facing < 0 and off < 75.0):
+        return penalty
+    return 0.0
 
 
 def _refine_above_ankles(
@@ -288,6 +384,8 @@ def calibrate(
     edges: np.ndarray,
     settings: CalibrationSettings = CalibrationSettings(),
     *,
+    keypoints: tuple[np.ndarray, np.ndarray] | None = None,
+    facing: int = 0,
     on_progress: ProgressFn | None = None,
 ) -> tuple[Camera, dict]:
     """Calibrate the camera from one frame's body region (thesis 4.2, plus azimuth).
@@ -300,6 +398,11 @@ def calibrate(
     silhouette, edges : ndarray of bool, shape (H, W)
         Input body region of the calibration frame.
     settings : CalibrationSettings
+    keypoints : (ndarray (17, 2), ndarray (17,)), optional
+        The calibration frame's 2D keypoints and confidences (stage 0's perception); see
+        ``settings.keypoint_weight``.
+    facing : int
+        +1 the pose model saw the face, -1 the back of the head, 0 unknown.
     on_progress : callable(stage, fraction), optional
 
     Returns
@@ -334,15 +437,27 @@ def calibrate(
     target = capsules.Target.from_masks(sil, np.asarray(edges, dtype=bool))
     scores: dict[float, float] = {}
     cams: dict[float, Camera] = {}
+    use_kp = keypoints is not None and settings.keypoint_weight > 0
+    if use_kp and np.count_nonzero(keypoints[1] > 0) < 3:  # type: ignore[index]
+        use_kp = False
+    kp = keypoints if use_kp else None
     for i, az in enumerate(settings.azimuths_deg):
         try:
-            cam = pca_camera(j, shape, sil, azimuth=float(np.radians(az)))
+            if kp is not None:
+                cam = keypoint_camera(j, *kp, azimuth=float(np.radians(az)), width=sil.shape[1],
+                                      height=sil.shape[0])  # fmt: skip
+            else:
+                cam = pca_camera(j, shape, sil, azimuth=float(np.radians(az)))
         except InvalidInput:  # the posture projects outside the image at this azimuth
             continue
         scores[float(az)] = float(
             capsules.d_S_batch(j[None], target, shape, cam, lambda_A=settings.lambda_A,
                                lambda_E=settings.lambda_E)[0]
-        )  # fmt: skip
+        ) + _facing_cost(float(az), facing, settings.facing_penalty)  # fmt: skip
+        if kp is not None:
+            scores[float(az)] += settings.keypoint_weight * _keypoint_cost(
+                j, *kp, cam, settings.keypoint_tau
+            )
         cams[float(az)] = cam
         if on_progress is not None:
             on_progress("calibration", (i + 1) / (len(settings.azimuths_deg) + 1))
@@ -355,7 +470,8 @@ def calibrate(
     for az in top:
         cam, d = cams[az], scores[az]
         if settings.refine:
-            cam, d = _refine(j, shape, target, cam, settings)
+            cam, d = _refine(j, shape, target, cam, settings, kp)
+            d += _facing_cost(az, facing, settings.facing_penalty)
         fits.append((d, az, cam))
     d, _, cam = min(fits, key=lambda f: (f[0], f[1]))
     if settings.refine and settings.above_ankles:
@@ -372,6 +488,8 @@ def refine_on_frames(
     silhouettes: np.ndarray,
     edges: np.ndarray,
     settings: CalibrationSettings = CalibrationSettings(),
+    *,
+    keypoints: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[Camera, float]:
     """Polish a camera on several frames: minimise the mean d_S of their postures.
 
@@ -384,6 +502,8 @@ def refine_on_frames(
     shape : BodyShape
     silhouettes, edges : ndarray of bool, shape (N, H, W)
         The frames' body regions.
+    keypoints : (ndarray (N, 17, 2), ndarray (N, 17)), optional
+        The frames' 2D keypoints and confidences: d_K joins d_S as in :func:`calibrate`.
 
     Returns
     -------
@@ -402,14 +522,20 @@ def refine_on_frames(
         for m, e in zip(silhouettes, edges, strict=True)
     ]
 
+    use_kp = keypoints is not None and settings.keypoint_weight > 0
+
     def score(c: Camera) -> float:
-        return float(
-            np.mean([
-                capsules.d_S_batch(p[None], t, shape, c, lambda_A=settings.lambda_A,
-                                   lambda_E=settings.lambda_E)[0]
-                for p, t in zip(j, targets, strict=True)
-            ])
-        )  # fmt: skip
+        d = [
+            capsules.d_S_batch(p[None], t, shape, c, lambda_A=settings.lambda_A,
+                               lambda_E=settings.lambda_E)[0]
+            for p, t in zip(j, targets, strict=True)
+        ]  # fmt: skip
+        if use_kp:
+            kp, conf = keypoints  # type: ignore[misc]
+            d = [di + settings.keypoint_weight
+                 * _keypoint_cost(p, kp[i], conf[i], c, settings.keypoint_tau)
+                 for i, (di, p) in enumerate(zip(d, j, strict=True))]  # fmt: skip
+        return float(np.mean(d))
 
     return _coordinate_search(camera, score)
 

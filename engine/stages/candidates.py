@@ -65,7 +65,7 @@ from engine.body.skeleton import (
     PART_ROOT_JOINT,
 )
 from engine.errors import InvalidInput
-from engine.measures import d_B
+from engine.measures import d_B, d_K
 from engine.render.camera import Camera
 from engine.render.capsules import (
     PART_CAPSULES,
@@ -77,6 +77,7 @@ from engine.render.capsules import (
     width_robust_cost,
 )
 from engine.stages import _bp
+from engine.stages.perception import MIRROR
 
 ALL_PARTS = tuple(range(N_PARTS))
 
@@ -181,6 +182,12 @@ class CandidateSettings:
         silhouette cannot see (turns in depth, the head where hair is missing from the body
         region) drift freely: on P1 with the true C the lowest-d_S posture was 20 deg from
         the truth. 0 is the thesis.
+    keypoint_weight, keypoint_tau : float
+        With 2D keypoints (:mod:`engine.stages.perception`), the image likelihood adds
+        ``keypoint_weight`` d_K (:func:`engine.measures.d_K`: swap-invariant, weighted by
+        the detector's confidence, saturating at ``keypoint_tau`` of the body's height in
+        the image). Beyond the thesis: it sees in-plane limb angles and an arm in front of
+        the torso, which the silhouette does not.
     ds_weight, width_weight : float
         The image likelihood of BP, the refinement and the candidates' image cost is
         ``ds_weight`` d_S + ``width_weight`` W, W the width-robust cost of
@@ -299,6 +306,8 @@ class CandidateSettings:
     n_prev: int = 0
     far_margin: float = 0.05
     prior_weight: float = 0.5
+    keypoint_weight: float = 1.0
+    keypoint_tau: float = 0.1
     bp_prior_weight: float = 0.0
     ds_weight: float = 1.0
     width_weight: float = 0.0
@@ -518,8 +527,13 @@ class _Scorer:
         camera: Camera,
         joints: np.ndarray,
         s: CandidateSettings,
+        keypoints: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> None:
         self.target, self.shape, self.camera = target, shape, camera
+        self.kp = None
+        if keypoints is not None and s.keypoint_weight > 0 and np.any(keypoints[1] > 0):
+            tau_px = s.keypoint_tau * camera.scale * max(float(np.ptp(joints[:, 1])), 0.3)
+            self.kp = (keypoints[0], keypoints[1], tau_px, s.keypoint_weight)
         self.lam = (s.lambda_a, s.lambda_e)
         self.ds_w, self.w_w = s.ds_weight, s.width_weight
         self.coverage_weight, self.deep_k = s.coverage_weight, s.deep_k
@@ -533,24 +547,32 @@ class _Scorer:
     def set_pose(self, joints: np.ndarray) -> None:
         self.parts.set_pose(joints)
 
-    def _width(self, postures: np.ndarray) -> np.ndarray:
-        if self.width is None:
+    def keypoints(self, postures: np.ndarray) -> np.ndarray:
+        """The keypoint term w d_K of postures (N, 17, 3), (N,); zeros without keypoints."""
+        if self.kp is None:
             return np.zeros(len(postures))
-        return self.w_w * width_robust_cost(
+        kp, conf, tau_px, w = self.kp
+        return w * d_K(self.camera.project(postures), kp, conf, tau_px=tau_px, mirror=MIRROR)
+
+    def _cues(self, postures: np.ndarray) -> np.ndarray:
+        """The terms beside d_S: keypoints, and the width-robust cost when weighted."""
+        if self.width is None:
+            return self.keypoints(postures)
+        return self.keypoints(postures) + self.w_w * width_robust_cost(
             postures, self.width, self.shape, self.camera,
             coverage_weight=self.coverage_weight, deep_k=self.deep_k,
         )  # fmt: skip
 
     def part(self, part: int, samples: np.ndarray) -> np.ndarray:
         self.n_evals += len(samples)
-        out = self._width(samples)
+        out = self._cues(samples)
         if self.ds_w > 0:
             out = out + self.ds_w * self.parts.score(part, samples)
         return out
 
     def full(self, postures: np.ndarray) -> np.ndarray:
         self.n_evals += len(postures)
-        out = self._width(postures)
+        out = self._cues(postures)
         if self.ds_w <= 0:
             return out
         lam_a, lam_e = self.lam
@@ -1066,6 +1088,7 @@ def estimate_candidates(
     settings: CandidateSettings | None = None,
     rng: np.random.Generator,
     prev: FrameCandidates | None = None,
+    keypoints: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> FrameCandidates:
     """Posture candidates of one frame (thesis 4.6, eq. 4.12-4.21; 6.4, 6.5, 6.7).
 
@@ -1084,6 +1107,9 @@ def estimate_candidates(
     rng : numpy.random.Generator
     prev : FrameCandidates, optional
         The previous frame's candidates (extra initial estimates, 6.7).
+    keypoints : (ndarray (17, 2), ndarray (17,)), optional
+        The frame's 2D keypoints and confidences: ``settings.keypoint_weight`` d_K joins the
+        image likelihood everywhere (BP, refinement, the candidates' d_s).
 
     Returns
     -------
@@ -1109,7 +1135,7 @@ def estimate_candidates(
     target = Target.from_masks(
         target_silhouette, target_edges, sigma_px=s.edge_sigma_px, xi=s.edge_xi
     )
-    scorer = _Scorer(target, shape, camera, ref, s)
+    scorer = _Scorer(target, shape, camera, ref, s, keypoints)
     ref_dirs = bone_vectors(ref)
     ref_dirs = ref_dirs / np.linalg.norm(ref_dirs, axis=-1, keepdims=True)
     off_dirs = offsets / np.maximum(np.linalg.norm(offsets, axis=-1, keepdims=True), 1e-12)
@@ -1295,6 +1321,7 @@ def estimate_candidates_chunk(
     settings: CandidateSettings | None = None,
     rng: np.random.Generator | Sequence[np.random.Generator],
     prev: FrameCandidates | None = None,
+    keypoints: tuple[np.ndarray, np.ndarray] | None = None,
     on_progress: Callable[[str, float], None] | None = None,
 ) -> list[FrameCandidates]:
     """Candidates of consecutive frames, each using the previous one's (thesis 4.6, 6.7).
@@ -1310,6 +1337,8 @@ def estimate_candidates_chunk(
     rng : numpy.random.Generator, or a sequence of N of them
         One stream for the chunk, or one per frame (then, with ``settings.n_prev`` 0, each
         frame's candidates are independent of the chunk it is computed in).
+    keypoints : (ndarray (N, 17, 2), ndarray (N, 17)), optional
+        Each frame's 2D keypoints and confidences.
     on_progress : callable (stage, fraction), optional
 
     Returns
@@ -1330,8 +1359,10 @@ def estimate_candidates_chunk(
         raise InvalidInput(f"rng must be one generator or one per frame ({sils.shape[0]})")
     out = []
     for t in range(sils.shape[0]):
+        kp_t = None if keypoints is None else (keypoints[0][t], keypoints[1][t])
         prev = estimate_candidates(
-            sils[t], edges[t], camera, shape, init[t], settings=settings, rng=rngs[t], prev=prev
+            sils[t], edges[t], camera, shape, init[t], settings=settings, rng=rngs[t], prev=prev,
+            keypoints=kp_t,
         )
         out.append(prev)
         if on_progress is not None:

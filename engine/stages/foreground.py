@@ -110,6 +110,21 @@ class ForegroundSettings:
     moving_camera_fraction : float
         Fraction of the pixels away from the body that differ from the background above
         which the frame is flagged ``camera_moving``.
+    fuse_learned : bool
+        Fuse the learned person mask (:mod:`engine.stages.perception`) with this evidence
+        where the pose model found the person (:func:`fuse_learned_mask`); frames without a
+        detection keep the thesis' region. Beyond the thesis.
+    learned_core_px, learned_band_px : float
+        At 240 rows (scaled with the image): the learned mask eroded by ``learned_core_px`` is
+        sure body, and nothing farther than ``learned_band_px`` outside it is body. In the
+        band between, the background difference and GrabCut decide (MediaPipe's mask is
+        computed at 256 x 256 and is 1-3 px off along the outline, where the difference is
+        exact against a seen background).
+    learned_max_gap : int
+        A frame where the pose model lost the person borrows the learned mask of the nearest
+        frame where it found him, up to this many frames away, with its core eroded and its
+        band widened by 1 px (at 240 rows) per frame of distance (P3: 38 % of the frames
+        lost, the grey clothes barely differ from the wall). Farther, the thesis' region.
     """
 
     background_samples: int = 30
@@ -129,6 +144,10 @@ class ForegroundSettings:
     interior_edges: bool = False
     canny_thresholds: tuple[float, float] = (30.0, 80.0)
     moving_camera_fraction: float = 0.25
+    fuse_learned: bool = True
+    learned_core_px: float = 2.0
+    learned_band_px: float = 4.0
+    learned_max_gap: int = 15
 
 
 @dataclass(frozen=True)
@@ -523,6 +542,83 @@ def segment_frame(
     return mask, raw, blobs, timing
 
 
+def fuse_learned_mask(
+    frame: np.ndarray,
+    learned: np.ndarray,
+    background: Background,
+    settings: ForegroundSettings,
+    *,
+    slack_px: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray, int, dict]:
+    """Body region from the learned person mask and the thesis' evidence (beyond the thesis).
+
+    The learned mask seeds GrabCut (4.1.1): its core is sure foreground, the image beyond a
+    band around it sure background, so a wall of the clothes' colour that the performer never
+    leaves, a prop or a passer-by stays out. Inside the band, a clear difference against a
+    seen background is sure foreground and a clear match sure background; the rest is
+    probable as the learned mask says, and GrabCut's colour models decide it.
+
+    Parameters
+    ----------
+    frame : ndarray of uint8, shape (H, W, 3)
+    learned : ndarray of uint8, shape (H, W)
+        Person probability x 255.
+    background : Background
+    settings : ForegroundSettings
+    slack_px : float
+        Extra erosion of the core and widening of the band (at 240 rows): the learned mask
+        was borrowed from another frame.
+
+    Returns
+    -------
+    Same as :func:`segment_frame`.
+    """
+    s = settings
+    t0 = time.perf_counter()
+    h = frame.shape[0]
+    person = learned > 127
+    lab = _lab(frame[None], s.blur_sigma_px)[0]
+    d = _distance(lab, background.lab)
+    never = background.never
+    if never.any():
+        d[never] = _distance(lab[never][:, None], background.never_samples).min(1)
+    thr = np.maximum(s.threshold, s.noise_factor * background.noise)
+    thr[never] = s.threshold * s.never_factor
+    raw = d > thr
+    seen_fg = (d > 2 * thr) & ~never
+    seen_bg = (d < 0.5 * thr) & ~never
+    k = h / 240.0
+    core = _disc(person, -max(1, round((s.learned_core_px + slack_px) * k)))
+    near = _disc(person, max(1, round((s.learned_band_px + slack_px) * k)))
+    timing = {"difference": time.perf_counter() - t0, "grabcut": 0.0}
+    t0 = time.perf_counter()
+    gc = np.full(person.shape, cv2.GC_BGD, np.uint8)
+    gc[near] = cv2.GC_PR_BGD
+    gc[person] = cv2.GC_PR_FGD
+    gc[near & seen_fg] = cv2.GC_FGD
+    gc[near & ~core & seen_bg] = cv2.GC_BGD
+    gc[core] = cv2.GC_FGD
+    mask = person | (near & seen_fg)
+    if s.grabcut and person.any():
+        r0, r1, c0, c1 = _bbox(near, s.grabcut_margin_px)
+        crop = (slice(r0, r1), slice(c0, c1))
+        mask = np.zeros_like(person)
+        mask[crop] = grabcut_seeded(frame[crop], gc[crop], iterations=s.grabcut_iterations)
+    mask, blobs = _clean(mask, s.min_blob_fraction, seen_bg & ~core, core)
+    timing["grabcut"] = time.perf_counter() - t0
+    return mask, raw, blobs, timing
+
+
+def _disc(mask: np.ndarray, r: int) -> np.ndarray:
+    """``mask`` dilated (r > 0) or eroded (r < 0) by a disc of radius |r| pixels."""
+    k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * abs(r) + 1, 2 * abs(r) + 1))
+    m = mask.astype(np.uint8)
+    if r > 0:
+        return np.asarray(cv2.dilate(m, k)) > 0
+    # pixels outside the image count as background, so a body cut by the border erodes there
+    return np.asarray(cv2.erode(m, k, borderType=cv2.BORDER_CONSTANT, borderValue=(0,))) > 0
+
+
 def skin_mask(frame: np.ndarray) -> np.ndarray:
     """Skin-coloured pixels (thesis 4.1.2; Chai and Ngan's YCrCb box).
 
@@ -566,6 +662,7 @@ def extract_foreground(
     frames: np.ndarray,
     settings: ForegroundSettings = ForegroundSettings(),
     *,
+    learned: np.ndarray | None = None,
     on_progress: ProgressFn | None = None,
 ) -> ForegroundResult:
     """Body regions S'_t' of a static-camera video (thesis 4.1).
@@ -575,6 +672,10 @@ def extract_foreground(
     frames : ndarray of uint8, shape (T', H, W, 3)
         RGB frames (:attr:`engine.io.video.Video.frames`).
     settings : ForegroundSettings
+    learned : ndarray of uint8, shape (T', H, W), optional
+        The learned person mask (:attr:`engine.stages.perception.Perception.mask`), fused
+        where it found a person when ``settings.fuse_learned``; a frame whose mask is empty
+        is flagged ``no_detection`` and keeps the thesis' region.
     on_progress : callable(stage, fraction), optional
         Called with ``"foreground"`` and the fraction of frames done.
 
@@ -592,6 +693,10 @@ def extract_foreground(
         raise InvalidInput(
             f"frames must be uint8 of shape (T' >= 2, H, W, 3), got {f.dtype} {f.shape}"
         )
+    if learned is not None and np.shape(learned) != f.shape[:3]:
+        raise InvalidInput(
+            f"learned must be (T', H, W) = {f.shape[:3]} like the frames, got {np.shape(learned)}"
+        )
     s = settings
     timing = {"background": 0.0, "difference": 0.0, "grabcut": 0.0, "skin": 0.0}
     t0 = time.perf_counter()
@@ -607,8 +712,15 @@ def extract_foreground(
     edges = np.zeros((n, h, w), bool)
     flags: list[tuple[str, ...]] = []
     grow = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (15, 15))
+    source = _nearest_detection(learned, s.learned_max_gap) if learned is not None else None
     for i in range(n):
-        mask, raw, blobs, t = segment_frame(f[i], bg, s)
+        if source is not None and s.fuse_learned and source[i] >= 0:
+            j = int(source[i])
+            mask, raw, blobs, t = fuse_learned_mask(
+                f[i], learned[j], bg, s, slack_px=float(abs(i - j))  # type: ignore[index]
+            )
+        else:
+            mask, raw, blobs, t = segment_frame(f[i], bg, s)
         timing["difference"] += t["difference"]
         timing["grabcut"] += t["grabcut"]
         t0 = time.perf_counter()
@@ -623,10 +735,27 @@ def extract_foreground(
         edges[i] = outline(mask, skin[i])
         if s.interior_edges:
             edges[i] |= interior_edges(f[i], mask, s.canny_thresholds)
-        flags.append(_flags(mask, raw, blobs, never, s, grow))
+        fl = _flags(mask, raw, blobs, never, s, grow)
+        if learned is not None and not learned[i].any():
+            fl = (*fl, "no_detection")
+        flags.append(fl)
         if on_progress is not None:
             on_progress("foreground", (i + 1) / n)
     return ForegroundResult(sil, edges, skin, bg.image, tuple(flags), timing)
+
+
+def _nearest_detection(learned: np.ndarray, max_gap: int) -> np.ndarray:
+    """For each frame, the nearest frame (itself first) whose learned mask is not empty and
+    at most ``max_gap`` frames away; -1 where there is none. (T', H, W) -> (T',) int."""
+    found = np.flatnonzero(learned.reshape(len(learned), -1).any(1))
+    out = np.full(len(learned), -1)
+    if found.size == 0:
+        return out
+    t = np.arange(len(learned))
+    pos = np.clip(np.searchsorted(found, t), 1, max(found.size - 1, 1))
+    lo, hi = found[pos - 1], found[np.minimum(pos, found.size - 1)]
+    near = np.where(np.abs(t - lo) <= np.abs(hi - t), lo, hi)
+    return np.where(np.abs(near - t) <= max_gap, near, -1)
 
 
 def _flags(

@@ -120,6 +120,11 @@ class SelectionSettings:
         0.49 -> 0.52, ``syn_64_29_13`` 0.38); median 5 then 0.05 s 0.616 / 3.46; median 3
         then 0.1 s 0.622 / 3.45 (``syn_64_17_1`` 0.75 -> 0.69: errors that change fast
         within a short segment blur).
+    poor_fit_region : float
+        When the median over frames of 1 - Dice between the reported posture's body and
+        stage 0's region exceeds this, the result's status is ``poor_fit``
+        (:func:`engine.pipeline.assess_fit`): the region is not the performer. Beyond the
+        thesis.
     """
 
     window_k: float = 10.0
@@ -139,6 +144,7 @@ class SelectionSettings:
     misfit_margin: float = 0.03
     error_smoothing_s: float = 0.05
     error_median_frames: int = 3
+    poor_fit_region: float = 0.45
 
 
 @dataclass(frozen=True)

@@ -61,6 +61,9 @@ def _same(a, b) -> None:
     np.testing.assert_allclose(a.shape.offsets, b.shape.offsets)
     assert a.camera.to_dict() == b.camera.to_dict()
     assert a.segments == b.segments and a.flags == b.flags and a.video == b.video
+    for f in ("keypoints", "keypoint_confidence"):
+        np.testing.assert_array_equal(getattr(a, f), getattr(b, f), err_msg=f)
+    assert a.perception_model == b.perception_model
 
 
 def test_prepared_round_trip(prepared, tmp_path) -> None:
@@ -177,3 +180,48 @@ def test_candidates_command_bad_input_is_one_line_error(case_dir, tmp_path, caps
     assert "--frames" in capsys.readouterr().err
     assert main([*bad, "--frames", "500:600"]) == 2
     assert "selects no frame" in capsys.readouterr().err
+
+
+def test_a_video_with_nobody_in_it_fails_with_a_plain_message(case_dir, tmp_path) -> None:
+    from engine.errors import RegistrationFailed
+    from engine.io.encode import write_video
+
+    rng = np.random.default_rng(0)
+    wall = rng.integers(60, 200, (120, 160, 3), dtype=np.uint8)
+    frames = np.repeat(wall[None], 16, 0)
+    frames = np.clip(frames + rng.normal(0, 1.5, frames.shape), 0, 255).astype(np.uint8)
+    video = write_video(tmp_path / "empty.mp4", frames, 15.0)
+    with pytest.raises(RegistrationFailed, match="could not find a person"):
+        prepare(case_dir["reference"], video, SETTINGS)
+
+
+def test_a_region_that_is_not_a_body_ends_poor_fit_not_ok(prepared) -> None:
+    """Stage 0's region replaced by a blob of wall: no posture explains it, and the result
+    says so instead of reporting errors as the performer's."""
+    import dataclasses
+
+    from engine.pipeline import assess_fit
+
+    sil = np.zeros_like(prepared.silhouettes)
+    sil[:, 10:110, 20:140] = True  # a rectangle of "body" filling the picture
+    bad = dataclasses.replace(prepared, silhouettes=sil, edges=np.zeros_like(sil))
+    chunks = [candidates(bad, r, SETTINGS) for r in bad.chunks(1)]
+    doc = select(bad, chunks, SETTINGS)
+    assert doc["summary"]["status"] == "poor_fit"
+    assert "separate you from the background" in doc["summary"]["messages"][0]
+    # the real regions fit: the same check leaves the status alone
+    good = select(prepared, [candidates(prepared, r, SETTINGS) for r in prepared.chunks(1)],
+                  SETTINGS)  # fmt: skip
+    assert good["summary"]["status"] != "poor_fit"
+    assert good["summary"]["fit"]["region_mismatch_median"] < 0.3
+    doc2 = {"summary": {"status": "ok", "messages": []}}
+    assess_fit(doc2, np.stack([c[0] for c in chunks[0].candidates]), bad, 1.0)
+    assert doc2["summary"]["status"] == "ok"  # the threshold decides
+
+
+def test_the_thesis_preset_runs_without_the_pose_model(case_dir) -> None:
+    p = prepare(case_dir["reference"], case_dir["video"], {**SETTINGS, "preset": "thesis"})
+    assert p.keypoints is None and p.perception_model == ""
+    q = prepare(case_dir["reference"], case_dir["video"], SETTINGS)
+    assert q.keypoints is not None and q.keypoints.shape == (q.n_frames, 17, 2)
+    assert q.perception_model.startswith("mediapipe")

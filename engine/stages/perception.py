@@ -1,0 +1,308 @@
+"""Stage 0, learned part: a person mask, 2D keypoints and the facing of every video frame.
+
+Beyond the thesis (whose stage 0 is background differencing, 4.1): a pose model trained on
+photographs of people separates a performer from a wall of his clothes' colour, which no
+background model can when he never leaves his spot, and it sees in-plane limb angles and arms
+in front of the torso, which a silhouette cannot. It is a strong cue, never trusted alone: it
+swaps left and right in many frames and loses the person in some. Stage 0 fuses its mask with
+the thesis' evidence (:mod:`engine.stages.foreground`); stages 1-3 use its keypoints through
+swap-invariant, confidence-weighted, robust terms (:mod:`engine.measures`).
+
+The model sits behind :class:`PoseModel`, so another one can replace it. The default,
+:class:`MediaPipePose`, is MediaPipe's legacy pose solution, whose two TFLite models
+(``pose_detection.tflite``, ``pose_landmark_full.tflite``) ship inside its PyPI wheel
+(pinned in ``pyproject.toml``): nothing is fetched at run time.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from engine.body.skeleton import JOINTS
+from engine.errors import InvalidInput
+
+ProgressFn = Callable[[str, float], None]
+
+#: Our joints (DESIGN.md order) -> MediaPipe pose landmark index (BlazePose topology); -1 for
+#: a joint the model has no landmark for (``hip``, ``neck`` are built from two landmarks).
+_MP_INDEX = {
+    "l_hip": 23, "l_knee": 25, "l_ankle": 27, "r_hip": 24, "r_knee": 26, "r_ankle": 28,
+    "l_shoulder": 11, "l_elbow": 13, "l_wrist": 15, "r_shoulder": 12, "r_elbow": 14,
+    "r_wrist": 16,
+}  # fmt: skip
+_NOSE, _L_EAR, _R_EAR = 0, 7, 8
+
+#: Joints a keypoint detector measures on the body's surface landmarks the way our skeleton
+#: defines them; the spine joints and the head's top have no landmark.
+KEYPOINT_JOINTS: tuple[int, ...] = tuple(
+    JOINTS.index(n) for n in ("hip", *_MP_INDEX)
+)
+
+#: Joint index -> the index of its mirror image (left <-> right), identity elsewhere.
+MIRROR: np.ndarray = np.array(
+    [JOINTS.index(n.replace("l_", "r_", 1) if n.startswith("l_")
+                  else n.replace("r_", "l_", 1) if n.startswith("r_") else n)
+     for n in JOINTS]
+)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class PerceptionSettings:
+    """Settings of the learned perception step.
+
+    Attributes
+    ----------
+    enabled : bool
+        Run the pose model (the ``thesis`` preset turns it off: stage 0 is then the thesis'
+        alone and no stage has keypoints).
+    min_detection_confidence : float
+        The person detector's threshold (MediaPipe's default).
+    min_detected_fraction : float
+        With fewer frames than this showing a person (to the pose model, or to the thesis'
+        region), the analysis fails with a message saying so rather than fit nothing.
+    """
+
+    enabled: bool = True
+    min_detection_confidence: float = 0.5
+    min_detected_fraction: float = 0.25
+
+
+@dataclass(frozen=True)
+class Perception:
+    """What the pose model saw in each video frame.
+
+    Attributes
+    ----------
+    mask : ndarray of uint8, shape (T', H, W)
+        Person probability x 255 (0 everywhere in a frame without a detection).
+    keypoints : ndarray, shape (T', 17, 2)
+        (u, v) pixels per joint in DESIGN.md order; NaN where the model has no landmark.
+    confidence : ndarray, shape (T', 17)
+        The model's visibility of each keypoint in [0, 1]; 0 where there is none.
+    facing : ndarray of int8, shape (T',)
+        +1 the performer faces the camera, -1 turns his back to it, 0 side-on or unknown
+        (from the face landmarks' depth against the ears').
+    detected : ndarray of bool, shape (T',)
+        The model found a person in the frame.
+    model : str
+        Name and version of the model, stored with the analysis.
+    """
+
+    mask: np.ndarray
+    keypoints: np.ndarray
+    confidence: np.ndarray
+    facing: np.ndarray
+    detected: np.ndarray
+    model: str
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.detected.shape[0])
+
+    def person(self, threshold: float = 0.5) -> np.ndarray:
+        """The learned person mask as bool, shape (T', H, W)."""
+        return self.mask > int(round(255 * threshold))
+
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        """Arrays for :func:`engine.io.stagefiles.save_arrays` (the mask stays uint8)."""
+        return {
+            "perception_mask": self.mask, "perception_keypoints": self.keypoints,
+            "perception_confidence": self.confidence, "perception_facing": self.facing,
+            "perception_detected": self.detected, "perception_model": np.array(self.model),
+        }  # fmt: skip
+
+    @classmethod
+    def from_arrays(cls, a: dict[str, np.ndarray]) -> Perception | None:
+        """Inverse of :meth:`to_arrays`; None when the arrays hold no perception."""
+        if "perception_keypoints" not in a:
+            return None
+        return cls(
+            np.asarray(a["perception_mask"]), np.asarray(a["perception_keypoints"]),
+            np.asarray(a["perception_confidence"]), np.asarray(a["perception_facing"]),
+            np.asarray(a["perception_detected"]), str(a["perception_model"]),
+        )  # fmt: skip
+
+    def scaled(self, factor: float) -> Perception:
+        """Keypoints in an image scaled by ``factor`` (the mask is left as it is)."""
+        return Perception(self.mask, self.keypoints * factor, self.confidence, self.facing,
+                          self.detected, self.model)  # fmt: skip
+
+
+class PoseModel(Protocol):
+    """A learned person detector: RGB frames (T', H, W, 3) uint8 in, :class:`Perception` out."""
+
+    name: str
+
+    def __call__(
+        self, frames: np.ndarray, *, on_progress: ProgressFn | None = None
+    ) -> Perception: ...
+
+
+def landmarks_to_joints(
+    landmarks: np.ndarray, visibility: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """BlazePose landmarks -> our 17 joints.
+
+    Parameters
+    ----------
+    landmarks : ndarray, shape (33, 2)
+        (u, v) pixels.
+    visibility : ndarray, shape (33,)
+
+    Returns
+    -------
+    keypoints : ndarray, shape (17, 2)
+        ``hip`` is the mid-point of the hips, ``neck`` of the shoulders; lower/upper chest and
+        head top have no landmark (NaN).
+    confidence : ndarray, shape (17,)
+    """
+    kp = np.full((len(JOINTS), 2), np.nan)
+    conf = np.zeros(len(JOINTS))
+    for name, i in _MP_INDEX.items():
+        kp[JOINTS.index(name)] = landmarks[i]
+        conf[JOINTS.index(name)] = visibility[i]
+    for name, (a, b) in {"hip": (23, 24), "neck": (11, 12)}.items():
+        kp[JOINTS.index(name)] = 0.5 * (landmarks[a] + landmarks[b])
+        conf[JOINTS.index(name)] = min(visibility[a], visibility[b])
+    # the neck is the shoulders' mid-point only roughly (BVH Neck1 sits higher): no weight
+    conf[JOINTS.index("neck")] = 0.0
+    return kp, np.clip(conf, 0.0, 1.0)
+
+
+def facing_from_depths(nose_z: float, ears_z: float, torso_px: float) -> int:
+    """+1 when the nose is nearer the camera than the ears (the face is seen), -1 when
+    farther, 0 when the difference is under 15 % of the torso's length in the image (the
+    head side-on, or the depths unsure)."""
+    d = (ears_z - nose_z) / max(torso_px, 1e-6)
+    return 1 if d > 0.15 else -1 if d < -0.15 else 0
+
+
+class MediaPipePose:
+    """MediaPipe's legacy pose solution (BlazePose full, with segmentation), run in video
+    mode so that it tracks the person between frames.
+
+    Parameters
+    ----------
+    min_detection_confidence : float
+        The person detector's threshold (MediaPipe's default 0.5).
+    """
+
+    def __init__(self, *, min_detection_confidence: float = 0.5) -> None:
+        self.min_detection_confidence = min_detection_confidence
+        self.name = f"mediapipe-pose-full-{_mediapipe_version()}"
+
+    def __call__(
+        self, frames: np.ndarray, *, on_progress: ProgressFn | None = None
+    ) -> Perception:
+        f = np.asarray(frames)
+        if f.ndim != 4 or f.shape[-1] != 3 or f.dtype != np.uint8:
+            raise InvalidInput(
+                f"frames must be uint8 of shape (T', H, W, 3), got {f.dtype} {f.shape}"
+            )
+        from mediapipe.python.solutions import pose as mp_pose  # heavy: import on use
+
+        n, h, w = f.shape[:3]
+        mask = np.zeros((n, h, w), np.uint8)
+        kps = np.full((n, len(JOINTS), 2), np.nan)
+        conf = np.zeros((n, len(JOINTS)))
+        facing = np.zeros(n, np.int8)
+        detected = np.zeros(n, bool)
+        out = (mask, kps, conf, facing, detected)
+        # Forward, then backward over the frames still without a person: the landmark model
+        # tracks a person from frame to frame far more reliably than the detector finds one
+        # (P3, grey on a grey wall: 58 % of the frames forward, 83 % backward, all together;
+        # P6 77 % / 98 %), so a person found late is followed back to the start.
+        for order, share in ((range(n), 0.5), (range(n - 1, -1, -1), 0.5)):
+            if order.step < 0 and detected.all():
+                break
+            missing = ~detected.copy()
+            with mp_pose.Pose(
+                static_image_mode=False, model_complexity=1, smooth_landmarks=True,
+                enable_segmentation=True, smooth_segmentation=True,
+                min_detection_confidence=self.min_detection_confidence,
+            ) as model:  # fmt: skip
+                for done, i in enumerate(order):
+                    r = model.process(np.ascontiguousarray(f[i]))
+                    if missing[i]:
+                        _store(r, i, out, (h, w))
+                    if on_progress is not None:
+                        on_progress("perception", (0.0 if order.step > 0 else share)
+                                    + share * (done + 1) / n)  # fmt: skip
+        if on_progress is not None:
+            on_progress("perception", 1.0)
+        return Perception(mask, kps, conf, facing, detected, self.name)
+
+
+def _store(result, i: int, out: tuple, size: tuple[int, int]) -> None:
+    """Write one MediaPipe result into frame i of ``out`` (mask, keypoints, confidence,
+    facing, detected)."""
+    if result.pose_landmarks is None:
+        return
+    mask, kps, conf, facing, detected = out
+    h, w = size
+    lm = np.array([(p.x * w, p.y * h, p.z * w, p.visibility)
+                   for p in result.pose_landmarks.landmark])  # fmt: skip
+    kps[i], conf[i] = landmarks_to_joints(lm[:, :2], lm[:, 3])
+    torso = float(np.linalg.norm(lm[11, :2] + lm[12, :2] - lm[23, :2] - lm[24, :2]) / 2)
+    facing[i] = facing_from_depths(lm[_NOSE, 2], 0.5 * (lm[_L_EAR, 2] + lm[_R_EAR, 2]), torso)
+    if result.segmentation_mask is not None:
+        mask[i] = np.clip(result.segmentation_mask * 255.0 + 0.5, 0, 255).astype(np.uint8)
+    detected[i] = True
+
+
+def _mediapipe_version() -> str:
+    try:
+        import mediapipe
+    except ImportError as e:  # the perception extra is not installed
+        raise InvalidInput(
+            "the learned perception step needs the 'perception' extra (pip install "
+            "'motion-coach[perception]'); use the 'thesis' preset to run without it"
+        ) from e
+    return str(mediapipe.__version__)
+
+
+def perceive(
+    frames: np.ndarray, model: PoseModel | None = None, *, on_progress: ProgressFn | None = None
+) -> Perception:
+    """Run a pose model over a video (the default: :class:`MediaPipePose`).
+
+    Parameters
+    ----------
+    frames : ndarray of uint8, shape (T', H, W, 3)
+        RGB frames.
+    model : PoseModel, optional
+
+    Raises
+    ------
+    InvalidInput
+        Bad frames, or the default model's package is not installed.
+    """
+    return (model or MediaPipePose())(frames, on_progress=on_progress)
+
+
+def resolve_swaps(
+    keypoints: np.ndarray, predicted: np.ndarray, confidence: np.ndarray
+) -> np.ndarray:
+    """Whether each frame's detection is left/right swapped against a prediction.
+
+    Parameters
+    ----------
+    keypoints, predicted : ndarray, shape (N, 17, 2)
+        Detected keypoints and the projection of the postures they should match.
+    confidence : ndarray, shape (N, 17)
+
+    Returns
+    -------
+    ndarray of bool, shape (N,)
+        True where the mirrored labels (:data:`MIRROR`) fit the prediction better.
+    """
+    ok = np.isfinite(keypoints).all(-1) & (confidence > 0)
+    d = np.where(ok, np.linalg.norm(np.nan_to_num(keypoints) - predicted, axis=-1), 0.0)
+    dm = np.where(ok[:, MIRROR], np.linalg.norm(np.nan_to_num(keypoints[:, MIRROR]) - predicted,
+                                                 axis=-1), 0.0)  # fmt: skip
+    w = confidence
+    return (dm * w[:, MIRROR]).sum(1) < (d * w).sum(1)
