@@ -159,6 +159,10 @@ class SegmentPublic(BaseModel):
     #: Where those frames disagree most: up to two bones whose picture differs most between
     #: the reported posture and the candidate that fits the video best.
     misfit_bones: list[str] = []
+    #: Per bone, the mean width (deg) of its error's range over the candidates the video
+    #: cannot tell from the reported posture: wide for a bend in depth one camera cannot
+    #: measure, narrow for an in-plane one. Empty for results that predate it.
+    bone_uncertainty_deg: dict[str, float] = {}
 
 
 class SegmentsPublic(BaseModel):

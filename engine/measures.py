@@ -199,47 +199,39 @@ def d_K(
     confidence: np.ndarray,
     *,
     tau_px: float,
-    mirror: np.ndarray | None = None,
 ) -> np.ndarray:
     """Keypoint difference: robust, confidence-weighted distance of projected joints to the
-    detected 2D keypoints, invariant to a left/right swap of the detection (beyond the thesis).
+    detected 2D keypoints, under the best of several readings of the detection (beyond the
+    thesis).
 
     Each joint's distance r counts as min(r / tau, 1): linear near the detection, bounded
-    beyond ``tau_px`` so a wrong keypoint costs no more than a missing one. The detection is
-    read both as labelled and mirrored (:data:`engine.stages.perception.MIRROR`) and the
-    better reading is kept for each posture: a pose model swaps left and right in many frames
-    (66 % on P2), so the swap is a hidden choice per frame and per posture.
+    beyond ``tau_px`` so a wrong keypoint costs no more than a missing one. A detection can be
+    read several ways, and the best reading counts for each posture: a pose model swaps left
+    and right in many frames (66 % on P2), so the labels as given and their mirror
+    (:func:`engine.stages.perception.readings`) are a hidden choice per frame and posture.
 
     Parameters
     ----------
     projected : ndarray, shape (N, 17, 2)
         Pixel positions of the postures' joints.
-    keypoints : ndarray, shape (17, 2)
-        Detected keypoints; NaN where there is none.
-    confidence : ndarray, shape (17,)
+    keypoints : ndarray, shape (R, 17, 2) or (17, 2)
+        Each reading's keypoints; NaN where there is none.
+    confidence : ndarray, shape (R, 17) or (17,)
         Weights in [0, 1]; 0 drops a joint.
     tau_px : float
         Distance at which a joint's cost saturates (pixels).
-    mirror : ndarray of int, shape (17,), optional
-        Left/right permutation of the joints; None compares the labels as given.
 
     Returns
     -------
     d : ndarray, shape (N,)
         In [0, 1]; 0 where no keypoint carries weight.
     """
-    kp = np.asarray(keypoints, float)
-    w = np.where(np.isfinite(kp).all(-1), np.asarray(confidence, float), 0.0)
-    total = w.sum()
-    if total <= 0:
+    kp = np.asarray(keypoints, float).reshape(-1, 17, 2)
+    conf = np.asarray(confidence, float).reshape(-1, 17)
+    w = np.where(np.isfinite(kp).all(-1), conf, 0.0)  # (R, 17)
+    total = w.sum(-1)
+    if not np.any(total > 0):
         return np.zeros(projected.shape[0])
-    kp = np.nan_to_num(kp)
-
-    def cost(k: np.ndarray, wk: np.ndarray) -> np.ndarray:
-        r = np.linalg.norm(projected - k, axis=-1)
-        return (np.minimum(r / tau_px, 1.0) * wk).sum(-1) / max(wk.sum(), 1e-12)
-
-    d = cost(kp, w)
-    if mirror is None:
-        return d
-    return np.minimum(d, cost(kp[mirror], w[mirror]))
+    r = np.linalg.norm(projected[:, None] - np.nan_to_num(kp)[None], axis=-1)  # (N, R, 17)
+    cost = (np.minimum(r / tau_px, 1.0) * w).sum(-1) / np.maximum(total, 1e-12)
+    return np.where(total > 0, cost, np.inf).min(-1)

@@ -73,6 +73,8 @@ class Prepared:
     keypoints : ndarray, shape (T', 17, 2), or None
         The pose model's 2D keypoints (working pixels; NaN where none), when perception ran.
     keypoint_confidence : ndarray, shape (T', 17), or None
+    keypoint_offsets : ndarray, shape (17, 2), or None
+        The pose model's offset from each joint (working pixels), removed from its readings.
     perception_model : str
         Name and version of the pose model ("" when none ran).
     """
@@ -95,6 +97,7 @@ class Prepared:
     timing_s: dict
     keypoints: np.ndarray | None = None
     keypoint_confidence: np.ndarray | None = None
+    keypoint_offsets: np.ndarray | None = None
     perception_model: str = ""
 
     @property
@@ -134,6 +137,9 @@ class Prepared:
         if self.keypoints is not None and self.keypoint_confidence is not None:
             arrays["keypoints"] = self.keypoints
             arrays["keypoint_confidence"] = self.keypoint_confidence
+            arrays["keypoint_offsets"] = (
+                np.zeros((17, 2)) if self.keypoint_offsets is None else self.keypoint_offsets
+            )
         meta = {
             "reference_path": self.reference_path, "video_path": self.video_path,
             "reference_name": self.reference_name, "reference_fps": self.reference_fps,
@@ -163,15 +169,20 @@ class Prepared:
             segments=Segments(tuple(seg["starts"]), int(seg["end"]), tuple(seg["names"])),
             flags=tuple(tuple(f) for f in m["flags"]), timing_s=m["timing_s"],
             keypoints=a.get("keypoints"), keypoint_confidence=a.get("keypoint_confidence"),
+            keypoint_offsets=a.get("keypoint_offsets"),
             perception_model=str(m.get("perception_model", "")),
         )  # fmt: skip
 
     def frame_keypoints(self, frames: range) -> tuple[np.ndarray, np.ndarray] | None:
-        """Keypoints (N, 17, 2) and confidences (N, 17) of ``frames``; None without them."""
+        """The keypoint readings (N, 2, 17, 2) and confidences (N, 2, 17) of ``frames``
+        (:func:`engine.stages.perception.readings`, offsets removed); None without them."""
+        from engine.stages.perception import readings
+
         if self.keypoints is None or self.keypoint_confidence is None:
             return None
         idx = np.asarray(frames)
-        return self.keypoints[idx], self.keypoint_confidence[idx]
+        return readings(self.keypoints[idx], self.keypoint_confidence[idx],
+                        self.keypoint_offsets)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -292,6 +303,7 @@ def prepare(
                   **{k: float(v) for k, v in timing.items()}},
         keypoints=None if perception is None else perception.keypoints,
         keypoint_confidence=None if perception is None else perception.confidence,
+        keypoint_offsets=None if perception is None else r.keypoint_offsets,
         perception_model="" if perception is None else perception.model,
     )  # fmt: skip
 
@@ -415,9 +427,58 @@ def select(
         video_frame_offset=int(v.get("offset", 0)),
     )  # fmt: skip
     add_image_best(doc, cands, d_s, camera)
+    add_uncertainty(doc, cands, d_s, prepared.reference_joints[selection.C],
+                    sel_settings.uncertainty_margin)  # fmt: skip
     chosen = np.stack([c[int(k)] for c, k in zip(cands, selection.selected, strict=True)])
     assess_fit(doc, chosen, prepared, sel_settings.poor_fit_region)
     return doc
+
+
+def add_uncertainty(
+    doc: dict,
+    candidates: Sequence[np.ndarray],
+    d_s: Sequence[np.ndarray],
+    reference: np.ndarray,
+    margin: float,
+) -> None:
+    """How sure each bone's error is: its range over the candidates the video cannot tell
+    from the reported one (beyond the thesis).
+
+    A candidate whose image evidence (d_S + keypoints, the candidates' ``d_s``) is within
+    ``margin`` of the best one's explains the video as well: one camera cannot choose
+    between them. Its depth flips (thesis 4.6.5) project to the same image, so a bone bent
+    in depth gets a wide range and an in-plane one a narrow range.
+
+    Adds to every frame ``bone_error_range_deg`` ([lo, hi] per bone, the reported error
+    always inside) and to every segment ``bone_uncertainty_deg`` (mean width per bone over
+    the frames it owns).
+
+    Parameters
+    ----------
+    doc : dict
+        The result document, changed in place.
+    candidates : list of ndarray, shape (K_t', 17, 3) each
+    d_s : list of ndarray, shape (K_t',) each
+    reference : ndarray, shape (T', 17, 3)
+        The reference posture at C(t') of each frame.
+    margin : float
+    """
+    from engine.measures import bone_angles
+
+    widths = []
+    for f, cands, d, ref in zip(doc["frames"], candidates, d_s, reference, strict=True):
+        near = d <= d.min() + margin
+        ang = np.degrees(bone_angles(cands[near], ref[None]))  # (K, 16)
+        own = np.asarray(f["bone_errors_deg"], float)
+        lo, hi = np.minimum(ang.min(0), own), np.maximum(ang.max(0), own)
+        f["bone_error_range_deg"] = np.round(np.stack([lo, hi], -1), 2).tolist()
+        widths.append(hi - lo)
+    w = np.array(widths)
+    t0 = doc["frames"][0]["t"] if doc["frames"] else 0
+    for seg in doc["segments"]:
+        a, b = seg["performer_start"] - t0, seg["performer_end"] - t0
+        part = w[max(a, 0) : max(b, a + 1)]
+        seg["bone_uncertainty_deg"] = np.round(part.mean(0), 2).tolist() if len(part) else []
 
 
 def assess_fit(doc: dict, postures: np.ndarray, prepared: Prepared, threshold: float) -> None:
@@ -537,6 +598,7 @@ def original_pixels(camera: Camera, width: int, height: int) -> Camera:
     return Camera(
         scale=camera.scale / k, theta_z=camera.theta_z, cx=(camera.cx + 0.5) / k - 0.5,
         cy=(camera.cy + 0.5) / k - 0.5, azimuth=camera.azimuth, width=width, height=height,
+        distance=camera.distance,
     )
 
 

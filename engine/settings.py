@@ -105,7 +105,7 @@ PRESETS: dict[str, Settings] = {
     "thesis": Settings(
         perception=PerceptionSettings(enabled=False),
         foreground=ForegroundSettings(fuse_learned=False),
-        calibration=CalibrationSettings(keypoint_weight=0.0),
+        calibration=CalibrationSettings(keypoint_weight=0.0, perspective=False),
         alignment=AlignmentSettings(keypoint_weight=0.0),
         candidates=CandidateSettings(keypoint_weight=0.0),
     ),

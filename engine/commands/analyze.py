@@ -28,6 +28,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--report", help="also write a self-contained HTML report here")
     p.add_argument("--frames", help="analyse only video frames A:B (Python slice, B exclusive)")
     p.add_argument("--fast", action="store_true", help="fewer samples and candidates (previews)")
+    p.add_argument(
+        "--preset", choices=("default", "fast", "thesis"),
+        help="settings preset: 'thesis' runs the thesis' evidence alone, without the learned "
+        "pose model (--fast is --preset fast)",
+    )  # fmt: skip
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.set_defaults(func=run)
@@ -86,13 +91,16 @@ def run(args: argparse.Namespace) -> int:
 
     n = read_video_count(args.video)
     frames = parse_frames(args.frames, n) if args.frames else None
-    settings = {"preset": "fast" if args.fast else "default", "seed": args.seed}
+    preset = args.preset or ("fast" if args.fast else "default")
+    settings = {"preset": preset, "seed": args.seed}
     doc = analyze(
         args.reference, args.video, settings, frames=frames, on_progress=_progress(args.quiet)
     )
     write_result(doc, args.out)
     if not args.quiet:
-        print(f"\nwrote {args.out}: mean posture error {doc['summary']['mean_error_deg']:.1f} deg")
+        summary = doc["summary"]
+        print(f"\nwrote {args.out}: {summary['status']}, mean posture error "
+              f"{summary['mean_error_deg']:.1f} deg")  # fmt: skip
         for m in doc["summary"]["messages"]:
             print(f"  {m}")
     if args.report:

@@ -11,6 +11,16 @@ At azimuth 0 the camera looks at the body's front (along -z): camera x = world x
 public benchmark cases (so (cx, cy) is the image of the world origin). A positive azimuth
 moves the camera counter-clockwise seen from above, towards the body's left (+x) side; 90 deg
 is a side view. theta_z rotates the image clockwise on screen (v points down).
+
+Beyond the thesis, ``distance`` > 0 makes it a pinhole camera that far (metres) in front of
+the world origin, with the same scale at the origin's depth d = 0:
+
+    u = cx + scale * D / (D + d) * ( cos(theta_z) x_c - sin(theta_z) y_c ),   d = depth(X)
+
+(and v likewise). A phone 3-4 m from a performer sees a part 0.5 m nearer 15 % larger; the
+scaled orthographic model cannot (DESIGN.md, stage 1). ``distance`` 0 is the thesis' camera.
+Capsule radii stay at the origin's scale (:mod:`engine.render.capsules`): their change with
+depth is a fraction of a pixel where the ends' positions move several.
 """
 
 from __future__ import annotations
@@ -32,6 +42,7 @@ class CameraChanges(TypedDict, total=False):
     azimuth: float
     width: int
     height: int
+    distance: float
 
 
 @dataclass(frozen=True)
@@ -50,6 +61,8 @@ class Camera:
         View direction about the vertical axis, radians (0 = facing the body's front).
     width, height : int
         Image size in pixels.
+    distance : float
+        Metres from the camera to the world origin along the view; 0 = scaled orthographic.
     """
 
     scale: float
@@ -59,6 +72,7 @@ class Camera:
     azimuth: float = 0.0
     width: int = 320
     height: int = 240
+    distance: float = 0.0
 
     # Cached: hot loops read these per call, and the camera is immutable. cached_property
     # writes the instance __dict__ directly, which a frozen dataclass allows.
@@ -85,7 +99,13 @@ class Camera:
 
     def project(self, points: np.ndarray) -> np.ndarray:
         """World points (..., 3) -> pixel positions (..., 2) as (u, v)."""
-        return np.asarray(points, dtype=float) @ self.A.T + np.array([self.cx, self.cy])
+        p = np.asarray(points, dtype=float)
+        uv = p @ self.A.T
+        if self.distance > 0:
+            # points nearer than a tenth of the distance are clamped there (never behind)
+            d = np.maximum(self.distance + p @ self.view_dir, 0.1 * self.distance)
+            uv = uv * (self.distance / d)[..., None]
+        return uv + np.array([self.cx, self.cy])
 
     def depth(self, points: np.ndarray) -> np.ndarray:
         """Depth along the viewing direction (larger is farther), (..., 3) -> (...)."""
@@ -105,6 +125,7 @@ class Camera:
             "azimuth_deg": float(np.degrees(self.azimuth)),
             "width": int(self.width),
             "height": int(self.height),
+            "perspective_distance_m": float(self.distance),
         }
 
     @classmethod
@@ -117,6 +138,7 @@ class Camera:
             azimuth=float(np.radians(d.get("azimuth_deg", 0.0))),
             width=int(d.get("width", 320)),
             height=int(d.get("height", 240)),
+            distance=float(d.get("perspective_distance_m", 0.0)),
         )
 
 

@@ -662,7 +662,10 @@ class PartScorer:
         ends = np.zeros((S, N_CAPSULES, 2, 2))
         depth = np.zeros((S, N_CAPSULES, 2))
         # the same arithmetic as Camera.project and Camera.depth, with A cached
-        ends[:, caps] = e3 @ self._A_T + self._c
+        if self.camera.distance > 0:
+            ends[:, caps] = self.camera.project(e3)
+        else:
+            ends[:, caps] = e3 @ self._A_T + self._c
         depth[:, caps] = e3 @ self._view
         out_i = np.empty((S, 4), dtype=np.int64)
         out_f = np.empty((S, 2))

@@ -30,7 +30,7 @@ from engine.stages.foreground import (
     extract_foreground,
     outline,
 )
-from engine.stages.perception import Perception
+from engine.stages.perception import Perception, keypoint_offsets, readings
 
 __all__ = [
     "AlignmentResult", "AlignmentSettings", "CalibrationSettings", "ForegroundResult",
@@ -63,6 +63,9 @@ class Stages02:
     view_costs : dict
         Stage 2's mean cost E_C per view azimuth tried (degrees -> E_C): the calibrated one
         and, with ``CalibrationSettings.check_mirror``, the best one facing the other way.
+    keypoint_offsets : ndarray, shape (17, 2)
+        The pose model's offset from each joint in pixels, measured on the first frames
+        (:func:`engine.stages.perception.keypoint_offsets`); zeros without perception.
     """
 
     foreground: ForegroundResult
@@ -72,6 +75,7 @@ class Stages02:
     alignment: AlignmentResult
     timing_s: dict
     view_costs: dict = field(default_factory=dict)
+    keypoint_offsets: np.ndarray = field(default_factory=lambda: np.zeros((17, 2)))
 
 
 def run_stages_0_2(
@@ -175,7 +179,15 @@ def run_stages_0_2_full(
                                  mirrored, keypoints=kp_k)[0])  # fmt: skip
     timing["calibration"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    kp_all = None if perception is None else (perception.keypoints, perception.confidence)
+    def keypoints_for(cam: Camera) -> tuple[np.ndarray, tuple | None]:
+        """The detector's offsets as seen through ``cam``, and the readings stages 1-2 use
+        (without the offsets unless ``alignment.keypoint_offsets``)."""
+        if perception is None:
+            return np.zeros((17, 2)), None
+        off = _keypoint_offsets(perception, cam, joints[c0], calibration.offset_frames)
+        used = off if alignment.keypoint_offsets else np.zeros((17, 2))
+        return off, readings(perception.keypoints, perception.confidence, used)
+
     results = []
     passes = len(cameras) + int(alignment.realign and calibration.refine_frames > 0)
     for i, cam in enumerate(cameras):
@@ -184,14 +196,16 @@ def run_stages_0_2_full(
             shape, _ = fit_body_shape(joints[c0], reference.shape, cam, fg.silhouettes[k])
         progress = None if on_progress is None else _share(on_progress, i, passes)
         aligned = align(joints, shape, cam, fg.silhouettes, fg.skin, alignment, start=c0,
-                        keypoints=kp_all, on_progress=progress)  # fmt: skip
+                        keypoints=keypoints_for(cam)[1], on_progress=progress)  # fmt: skip
         results.append((aligned.E_C, i, cam, aligned))
     # the camera whose view explains the whole video best (CalibrationSettings.check_mirror)
     _, _, camera, result = min(results, key=lambda r: (r[0], r[1]))
     timing["alignment"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     if calibration.refine_frames > 0:
-        camera = _refine_camera(camera, reference, fg, result, calibration, kp_all)
+        camera = _refine_camera(camera, reference, fg, result, calibration,
+                                keypoints_for(camera)[1])  # fmt: skip
+    offsets, kp_all = keypoints_for(camera)
     factors: dict[str, float] = {}
     shape = reference.shape
     if calibration.fit_width:  # the performer's widths, for the final camera
@@ -204,7 +218,7 @@ def run_stages_0_2_full(
                        keypoints=kp_all, on_progress=progress)  # fmt: skip
         timing["alignment"] += time.perf_counter() - t0
     views = {round(float(np.degrees(r[2].azimuth)), 6): float(r[0]) for r in results}
-    return Stages02(fg, camera, shape, factors, result, timing, views)
+    return Stages02(fg, camera, shape, factors, result, timing, views, offsets)
 
 
 def _refine_camera(
@@ -231,6 +245,18 @@ def _refine_camera(
         camera, posed, reference.shape, fg.silhouettes[idx], outlines, calibration, keypoints=kp
     )
     return camera
+
+
+def _keypoint_offsets(
+    perception: Perception, camera: Camera, posture: np.ndarray, n_frames: int
+) -> np.ndarray:
+    """The detector's offsets on the first ``n_frames`` frames, which show ``posture`` (17, 3)
+    by stage 1's assumption; zeros when fewer than two of them have a detection."""
+    idx = np.flatnonzero(perception.detected[:n_frames])
+    if idx.size < 2:
+        return np.zeros((17, 2))
+    pred = np.broadcast_to(camera.project(posture), (idx.size, 17, 2))
+    return keypoint_offsets(perception.keypoints[idx], perception.confidence[idx], pred)
 
 
 def _calibration_keypoints(

@@ -30,6 +30,7 @@ from engine.errors import InvalidInput, RegistrationFailed
 from engine.measures import LAMBDA_A, LAMBDA_E
 from engine.render import capsules
 from engine.render.camera import Camera
+from engine.stages.perception import MIRROR, readings
 
 ProgressFn = Callable[[str, float], None]
 
@@ -94,8 +95,18 @@ class CalibrationSettings:
         ``keypoint_weight`` d_K (:func:`engine.measures.d_K`). Beyond the thesis: a body
         region that lacks the legs (a wall of the trousers' colour) gave a camera a third too
         small; the keypoints do not depend on the background.
+    offset_frames : int
+        Video frames from the first on which the pose model's offset from each joint is
+        measured (:func:`engine.stages.perception.keypoint_offsets`); 0 trusts the
+        keypoints as they come.
     keypoint_tau : float
         d_K's saturation distance as a fraction of the body's height in the image.
+    perspective : bool
+        Let :func:`refine_on_frames` also fit the camera's distance (a pinhole camera,
+        :class:`~engine.render.camera.Camera`), which frames of postures at different depths
+        (a bend towards the camera) tell apart; one upright frame does not, so stage 1's
+        first calibration stays orthographic. Beyond the thesis: a phone 3.5 m away at 35 deg
+        (P4) sees the near side of the body larger.
     facing_penalty : float
         Added to the score of an azimuth that contradicts the facing the pose model saw
         (the face seen: not a view from behind; the back of the head: not one from the front).
@@ -112,9 +123,11 @@ class CalibrationSettings:
     check_mirror: bool = True
     refine_top: int = 3
     refine_frames: int = 15
+    offset_frames: int = 5
     keypoint_weight: float = 1.0
     keypoint_tau: float = 0.1
     facing_penalty: float = 0.1
+    perspective: bool = True
 
 
 @dataclass(frozen=True)
@@ -248,8 +261,6 @@ def keypoint_camera(
     InvalidInput
         Fewer than three keypoints carry weight.
     """
-    from engine.stages.perception import MIRROR
-
     ok = np.isfinite(keypoints).all(-1) & (confidence > 0)
     if ok.sum() < 3:
         raise InvalidInput("at least three 2D keypoints are needed to place the camera")
@@ -276,13 +287,12 @@ def keypoint_camera(
 def _keypoint_cost(
     joints: np.ndarray, keypoints: np.ndarray, confidence: np.ndarray, cam: Camera, tau: float
 ) -> float:
-    """d_K of one posture (17, 3) at a camera, saturating at ``tau`` of its height."""
+    """d_K of one posture (17, 3) at a camera against a detection's readings (R, 17, 2),
+    (R, 17), saturating at ``tau`` of the posture's height."""
     from engine.measures import d_K
-    from engine.stages.perception import MIRROR
 
     tau_px = tau * cam.scale * max(float(np.ptp(joints[:, 1])), 0.3)
-    return float(d_K(cam.project(joints)[None], keypoints, confidence, tau_px=tau_px,
-                     mirror=MIRROR)[0])  # fmt: skip
+    return float(d_K(cam.project(joints)[None], keypoints, confidence, tau_px=tau_px)[0])
 
 
 def _refine(
@@ -293,7 +303,8 @@ def _refine(
     s: CalibrationSettings,
     keypoints: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[Camera, float]:
-    """Coordinate search on scale and position minimising d_S (+ the keypoint term)."""
+    """Coordinate search on scale and position minimising d_S (+ the keypoint term, over
+    the detection's readings (R, 17, 2), (R, 17))."""
 
     def score(c: Camera) -> float:
         d = float(
@@ -342,9 +353,13 @@ def _refine_above_ankles(
     return _coordinate_search(cam, score)
 
 
-def _coordinate_search(cam: Camera, score: Callable[[Camera], float]) -> tuple[Camera, float]:
+def _coordinate_search(
+    cam: Camera, score: Callable[[Camera], float], *, perspective: bool = False
+) -> tuple[Camera, float]:
     """Greedy search on position (steps of 4, 2, 1, 0.5 px), scale (the same in %) and the
-    in-plane angle (half of it in degrees).
+    in-plane angle (half of it in degrees); with ``perspective``, also the perspective
+    strength 1 / distance (steps of 0.02 per metre per pixel step, from 0 = orthographic up
+    to 1 / 1.5 m).
 
     At each step size, moves to the best of the eight neighbours while it lowers ``score``.
     The angle is searched too because PCA's is biased by whatever the region lacks or has
@@ -364,6 +379,13 @@ def _coordinate_search(cam: Camera, score: Callable[[Camera], float]) -> tuple[C
                 cam.with_(theta_z=cam.theta_z + step_rad),
                 cam.with_(theta_z=cam.theta_z - step_rad),
             ]  # fmt: skip
+            if perspective:
+                rho = 1.0 / cam.distance if cam.distance > 0 else 0.0
+                for r in (rho + 0.02 * step_px, rho - 0.02 * step_px):
+                    if r <= 1e-9:
+                        cands.append(cam.with_(distance=0.0))
+                    elif r <= 1.0 / 1.5:
+                        cands.append(cam.with_(distance=1.0 / r))
             scores = [score(c) for c in cands]
             k = int(np.argmin(scores))
             if scores[k] < best - 1e-9:
@@ -441,6 +463,7 @@ def calibrate(
     if use_kp and np.count_nonzero(keypoints[1] > 0) < 3:  # type: ignore[index]
         use_kp = False
     kp = keypoints if use_kp else None
+    kp_read = None if kp is None else readings(*kp)
     for i, az in enumerate(settings.azimuths_deg):
         try:
             if kp is not None:
@@ -454,9 +477,9 @@ def calibrate(
             capsules.d_S_batch(j[None], target, shape, cam, lambda_A=settings.lambda_A,
                                lambda_E=settings.lambda_E)[0]
         ) + _facing_cost(float(az), facing, settings.facing_penalty)  # fmt: skip
-        if kp is not None:
+        if kp_read is not None:
             scores[float(az)] += settings.keypoint_weight * _keypoint_cost(
-                j, *kp, cam, settings.keypoint_tau
+                j, kp_read[0], kp_read[1], cam, settings.keypoint_tau
             )
         cams[float(az)] = cam
         if on_progress is not None:
@@ -470,7 +493,7 @@ def calibrate(
     for az in top:
         cam, d = cams[az], scores[az]
         if settings.refine:
-            cam, d = _refine(j, shape, target, cam, settings, kp)
+            cam, d = _refine(j, shape, target, cam, settings, kp_read)
             d += _facing_cost(az, facing, settings.facing_penalty)
         fits.append((d, az, cam))
     d, _, cam = min(fits, key=lambda f: (f[0], f[1]))
@@ -502,8 +525,9 @@ def refine_on_frames(
     shape : BodyShape
     silhouettes, edges : ndarray of bool, shape (N, H, W)
         The frames' body regions.
-    keypoints : (ndarray (N, 17, 2), ndarray (N, 17)), optional
-        The frames' 2D keypoints and confidences: d_K joins d_S as in :func:`calibrate`.
+    keypoints : (ndarray (N, R, 17, 2), ndarray (N, R, 17)), optional
+        The readings of the frames' 2D keypoints and their confidences
+        (:func:`engine.stages.perception.readings`): d_K joins d_S as in :func:`calibrate`.
 
     Returns
     -------
@@ -537,7 +561,7 @@ def refine_on_frames(
                  for i, (di, p) in enumerate(zip(d, j, strict=True))]  # fmt: skip
         return float(np.mean(d))
 
-    return _coordinate_search(camera, score)
+    return _coordinate_search(camera, score, perspective=settings.perspective)
 
 
 #: Part groups whose capsule radii :func:`fit_body_shape` scales together.

@@ -77,7 +77,6 @@ from engine.render.capsules import (
     width_robust_cost,
 )
 from engine.stages import _bp
-from engine.stages.perception import MIRROR
 
 ALL_PARTS = tuple(range(N_PARTS))
 
@@ -187,7 +186,13 @@ class CandidateSettings:
         ``keypoint_weight`` d_K (:func:`engine.measures.d_K`: swap-invariant, weighted by
         the detector's confidence, saturating at ``keypoint_tau`` of the body's height in
         the image). Beyond the thesis: it sees in-plane limb angles and an arm in front of
-        the torso, which the silhouette does not.
+        the torso, which the silhouette does not. The keypoints carry the pose model's own
+        offsets from our joints measured on the first frames
+        (:func:`engine.stages.perception.keypoint_offsets`). ``benchmarks/cases.py --only P``
+        (mean of the six public cases; rank of eps_t' / of the bones, reported/true error
+        magnitude, 2D joint error % of height): 0 gives 0.48 / 0.00 / 0.18 / 1.80 (the prior
+        keeps the reference), 0.3 0.56 / 0.21 / 0.54 / 1.83, 0.5 0.53 / 0.40 / 1.03 / 2.02,
+        1 0.57 / 0.55 / 2.96 / 2.60 (the keypoints' own noise becomes reported error).
     ds_weight, width_weight : float
         The image likelihood of BP, the refinement and the candidates' image cost is
         ``ds_weight`` d_S + ``width_weight`` W, W the width-robust cost of
@@ -306,7 +311,7 @@ class CandidateSettings:
     n_prev: int = 0
     far_margin: float = 0.05
     prior_weight: float = 0.5
-    keypoint_weight: float = 1.0
+    keypoint_weight: float = 0.5
     keypoint_tau: float = 0.1
     bp_prior_weight: float = 0.0
     ds_weight: float = 1.0
@@ -552,7 +557,7 @@ class _Scorer:
         if self.kp is None:
             return np.zeros(len(postures))
         kp, conf, tau_px, w = self.kp
-        return w * d_K(self.camera.project(postures), kp, conf, tau_px=tau_px, mirror=MIRROR)
+        return w * d_K(self.camera.project(postures), kp, conf, tau_px=tau_px)
 
     def _cues(self, postures: np.ndarray) -> np.ndarray:
         """The terms beside d_S: keypoints, and the width-robust cost when weighted."""
@@ -1107,9 +1112,10 @@ def estimate_candidates(
     rng : numpy.random.Generator
     prev : FrameCandidates, optional
         The previous frame's candidates (extra initial estimates, 6.7).
-    keypoints : (ndarray (17, 2), ndarray (17,)), optional
-        The frame's 2D keypoints and confidences: ``settings.keypoint_weight`` d_K joins the
-        image likelihood everywhere (BP, refinement, the candidates' d_s).
+    keypoints : (ndarray (R, 17, 2), ndarray (R, 17)), optional
+        The readings of the frame's 2D keypoints and their confidences
+        (:func:`engine.stages.perception.readings`): ``settings.keypoint_weight`` d_K joins
+        the image likelihood everywhere (BP, refinement, the candidates' d_s).
 
     Returns
     -------
@@ -1337,8 +1343,8 @@ def estimate_candidates_chunk(
     rng : numpy.random.Generator, or a sequence of N of them
         One stream for the chunk, or one per frame (then, with ``settings.n_prev`` 0, each
         frame's candidates are independent of the chunk it is computed in).
-    keypoints : (ndarray (N, 17, 2), ndarray (N, 17)), optional
-        Each frame's 2D keypoints and confidences.
+    keypoints : (ndarray (N, R, 17, 2), ndarray (N, R, 17)), optional
+        Each frame's keypoint readings and confidences.
     on_progress : callable (stage, fraction), optional
 
     Returns

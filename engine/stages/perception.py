@@ -284,6 +284,68 @@ def perceive(
     return (model or MediaPipePose())(frames, on_progress=on_progress)
 
 
+def readings(
+    keypoints: np.ndarray, confidence: np.ndarray, offsets: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The two readings of a detection, labels as given and mirrored, for :func:`d_K`.
+
+    Parameters
+    ----------
+    keypoints : ndarray, shape (..., 17, 2)
+    confidence : ndarray, shape (..., 17)
+    offsets : ndarray, shape (17, 2), optional
+        The detector's offset from each joint (:func:`keypoint_offsets`), removed from both
+        readings once the labels are read.
+
+    Returns
+    -------
+    keypoints : ndarray, shape (..., 2, 17, 2)
+    confidence : ndarray, shape (..., 2, 17)
+    """
+    kp = np.asarray(keypoints, float)
+    off = np.zeros((17, 2)) if offsets is None else np.asarray(offsets, float)
+    both = np.stack([kp - off, kp[..., MIRROR, :] - off], axis=-3)
+    c = np.asarray(confidence, float)
+    return both, np.stack([c, c[..., MIRROR]], axis=-2)
+
+
+def keypoint_offsets(
+    keypoints: np.ndarray, confidence: np.ndarray, predicted: np.ndarray
+) -> np.ndarray:
+    """The detector's own offset from each of our joints, where the posture is known.
+
+    A pose model puts a hip or a wrist where its training data did, not where a motion
+    capture skeleton has the joint, and loose clothes or a club move it further: on the
+    public cases its keypoints are 4 px (median) from the truth's joints, 2.6-3.3 px once a
+    constant offset per joint, measured on the first five frames, is removed
+    (``benchmarks/perception.py``). Stage 1 assumes the first frames show the reference's
+    first posture (thesis 4.2, B'_0 = B_0), which is what makes the offset measurable.
+
+    Parameters
+    ----------
+    keypoints : ndarray, shape (N, 17, 2)
+    confidence : ndarray, shape (N, 17)
+    predicted : ndarray, shape (N, 17, 2)
+        Where the joints are in those frames (the known posture through the camera).
+
+    Returns
+    -------
+    offsets : ndarray, shape (17, 2)
+        Median of keypoint - joint per joint after resolving left/right per frame; 0 for a
+        joint seen in fewer than two frames.
+    """
+    kp = np.asarray(keypoints, float)
+    swap = resolve_swaps(kp, predicted, confidence)
+    kp = np.where(swap[:, None, None], kp[:, MIRROR], kp)
+    conf = np.where(swap[:, None], np.asarray(confidence)[:, MIRROR], confidence)
+    res = np.where(((conf > 0) & np.isfinite(kp).all(-1))[..., None], kp - predicted, np.nan)
+    seen = np.isfinite(res).all(-1).sum(0) >= 2
+    out = np.zeros((17, 2))
+    if seen.any():
+        out[seen] = np.nanmedian(res[:, seen], axis=0)
+    return out
+
+
 def resolve_swaps(
     keypoints: np.ndarray, predicted: np.ndarray, confidence: np.ndarray
 ) -> np.ndarray:

@@ -120,6 +120,10 @@ class SelectionSettings:
         0.49 -> 0.52, ``syn_64_29_13`` 0.38); median 5 then 0.05 s 0.616 / 3.46; median 3
         then 0.1 s 0.622 / 3.45 (``syn_64_17_1`` 0.75 -> 0.69: errors that change fast
         within a short segment blur).
+    uncertainty_margin : float
+        Candidates whose image evidence is within this of the frame's best explain the video
+        as well; the range of each bone's error over them is its uncertainty
+        (:func:`engine.pipeline.add_uncertainty`).
     poor_fit_region : float
         When the median over frames of 1 - Dice between the reported posture's body and
         stage 0's region exceeds this, the result's status is ``poor_fit``
@@ -145,6 +149,7 @@ class SelectionSettings:
     error_smoothing_s: float = 0.05
     error_median_frames: int = 3
     poor_fit_region: float = 0.45
+    uncertainty_margin: float = 0.01
 
 
 @dataclass(frozen=True)

@@ -298,7 +298,10 @@ def read_summary(analysis_id: str, user: CurrentUser, session: SessionDep, notif
         d["name"] = (
             name if (a.reference.domain_config or {}).get("segment_names") else (own or name)
         )
-        d["worst_bones"] = sorted(s.bone_mean_errors_deg.items(), key=lambda kv: -kv[1])[:3]
+        # (bone, mean error, width of its range over the candidates the video cannot tell
+        # apart, or None for results that predate it)
+        worst = sorted(s.bone_mean_errors_deg.items(), key=lambda kv: -kv[1])[:3]
+        d["worst_bones"] = [(b, e, s.bone_uncertainty_deg.get(b)) for b, e in worst]
         d["score"] = raw[s.index].get("score_deg", s.mean_error_deg) if s.index < len(raw) else None
         out.append(d)
     return {

@@ -328,13 +328,16 @@ def joint_angles_deg(joints: np.ndarray) -> np.ndarray:
 
 
 def result_csv(result: dict[str, Any]) -> str:
-    """One row per video frame: timing, errors per bone, the performer's joint angles."""
+    """One row per video frame: timing, errors per bone, each bone's range over the
+    candidates the video cannot tell apart (``range_deg:BONE`` as ``lo-hi``; empty for
+    results that predate it), the performer's joint angles."""
     frames = result.get("frames") or []
     buf = io.StringIO()
     w = csv.writer(buf)
     w.writerow(
         ["t", "time_s", "reference_frame", "selected", "posture_error_deg"]
         + [f"error_deg:{b}" for b in BONE_NAMES]
+        + [f"range_deg:{b}" for b in BONE_NAMES]
         + [a[0] for a in JOINT_ANGLES]
     )
     fps = float((result.get("video") or {}).get("fps") or 0) or 1.0
@@ -345,6 +348,8 @@ def result_csv(result: dict[str, Any]) -> str:
             [f["t"], f"{f['t'] / fps:.4f}", f["reference_frame"], f.get("selected", 0),
              f"{float(f['posture_error_deg']):.3f}"]
             + [f"{float(e):.3f}" for e in f["bone_errors_deg"]]
+            + [f"{lo:.1f}-{hi:.1f}" for lo, hi in f.get("bone_error_range_deg", [])]
+            + [""] * (len(BONE_NAMES) - len(f.get("bone_error_range_deg", [])))
             + [f"{float(x):.3f}" for x in a]
         )  # fmt: skip
     return buf.getvalue()

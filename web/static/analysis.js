@@ -253,6 +253,13 @@
       const title = svg("title", {}); title.textContent = name; pl.append(title);
       s.append(pl);
     }
+    // Each plotted bone's range over the candidates the video cannot tell apart, as a band.
+    if (result.frames.every(function (f) { return f.bone_error_range_deg; })) {
+      bones.forEach(function (b, k) {
+        const edge = function (j) { return result.frames.map(function (f, i) { return x(i).toFixed(1) + "," + y(Math.min(f.bone_error_range_deg[b][j], top)).toFixed(1); }); };
+        s.append(svg("polygon", { points: edge(1).concat(edge(0).reverse()).join(" "), fill: PALETTE[k % PALETTE.length], "fill-opacity": 0.12, class: "range-band" }));
+      });
+    }
     bones.forEach(function (b, k) { line(result.frames.map(function (f) { return f.bone_errors_deg[b]; }), PALETTE[k % PALETTE.length], 1.5, BONES[b]); });
     line(result.frames.map(function (f) { return f.posture_error_deg; }), "#c92a2a", 3, "posture error");
     const cursor = svg("line", { id: "plot-cursor", y1: T, y2: H - B, stroke: "#111", "stroke-width": 2, "vector-effect": "non-scaling-stroke" });
@@ -302,6 +309,11 @@
     if (Math.abs(r - 1) < 0.05) return "tempo: as the expert";
     return "tempo: " + r.toFixed(2) + "× the expert's time (" + (r > 1 ? "slower" : "faster") + ")";
   }
+  // How sure a bone's error is: half the width of its range over the candidates the video
+  // cannot tell apart (a bend in depth one camera cannot measure gets a wide range).
+  function spread(width) {
+    return width != null && width >= 1 ? " (± " + Math.round(width / 2) + "°, depth unsure)" : "";
+  }
   function buildSegments() {
     const box = $("segment-cards");
     box.textContent = "";
@@ -317,7 +329,7 @@
         coach.el("span", { class: "score", text: deg(s.score != null ? s.score : s.mean_error_deg) }),
         coach.el("span", { class: "muted", text: "frames " + s.performer_start + "–" + s.performer_end }),
         coach.el("span", { text: tempoText(s.tempo_ratio) }),
-        coach.el("ul", {}, s.worst_bones.map(function (wb) { return coach.el("li", { text: wb[0] + ": " + deg(wb[1]) }); })),
+        coach.el("ul", {}, s.worst_bones.map(function (wb) { return coach.el("li", { text: wb[0] + ": " + deg(wb[1]) + spread(wb[2]) }); })),
         warn,  // null (skipped) where the video agrees
       ]);
       card.style.borderLeftColor = misfit ? MISFIT : coach.errorColor(s.mean_error_deg);

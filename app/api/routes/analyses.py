@@ -282,6 +282,9 @@ def summarise_segments(result: dict[str, Any]) -> list[SegmentPublic]:
                 bone_mean_errors_deg=named,
                 misfit_frames=len(inside),
                 misfit_bones=misfit_bones(inside, height),
+                bone_uncertainty_deg=dict(
+                    zip(BONE_NAMES, seg.get("bone_uncertainty_deg", []), strict=False)
+                ),
             )
         )
     return out

@@ -21,7 +21,9 @@ from engine.stages.perception import (
     MIRROR,
     Perception,
     facing_from_depths,
+    keypoint_offsets,
     landmarks_to_joints,
+    readings,
     resolve_swaps,
 )
 from tests.conftest import BENCH_CASES
@@ -84,16 +86,30 @@ def test_d_K_ignores_missing_and_unconfident_joints(rng):
     assert d_K(p[None], np.full((17, 2), np.nan), conf, tau_px=10.0)[0] == 0.0
 
 
-def test_d_K_with_mirror_is_invariant_to_a_swapped_detection(rng):
+def test_d_K_over_both_readings_is_invariant_to_a_swapped_detection(rng):
     postures = rng.uniform(50, 150, (20, 17, 2))
     kp = _posture_2d(rng)
     conf = rng.uniform(0.2, 1.0, 17)
-    straight = d_K(postures, kp, conf, tau_px=15.0, mirror=MIRROR)
-    swapped = d_K(postures, kp[MIRROR], conf[MIRROR], tau_px=15.0, mirror=MIRROR)
+    straight = d_K(postures, *readings(kp, conf), tau_px=15.0)
+    swapped = d_K(postures, *readings(kp[MIRROR], conf[MIRROR]), tau_px=15.0)
     np.testing.assert_array_equal(straight, swapped)
-    # a posture that matches the mirrored labels costs nothing with the mirror, not without
-    assert d_K(kp[MIRROR][None], kp, conf, tau_px=15.0, mirror=MIRROR)[0] == 0.0
+    # a posture that matches the mirrored labels costs nothing over both readings, not over one
+    assert d_K(kp[MIRROR][None], *readings(kp, conf), tau_px=15.0)[0] == 0.0
     assert d_K(kp[MIRROR][None], kp, conf, tau_px=15.0)[0] > 0.0
+
+
+def test_offsets_are_measured_after_left_right_and_removed_from_both_readings(rng):
+    pred = rng.uniform(50, 150, (5, 17, 2))
+    off = rng.normal(0, 3, (17, 2))
+    kp = pred + off
+    kp[2] = kp[2][MIRROR]  # one frame's labels swapped
+    conf = np.ones((5, 17))
+    np.testing.assert_allclose(keypoint_offsets(kp, conf, pred), off)
+    both, c = readings(kp[0], conf[0], off)
+    np.testing.assert_allclose(both[0], pred[0])  # labels as given, offsets removed
+    both, c = readings(kp[2], conf[2], off)
+    np.testing.assert_allclose(both[1], pred[2])  # the swapped frame: its mirrored reading
+    assert c.shape == (2, 17)
 
 
 def test_resolve_swaps_finds_the_mirrored_frames(rng):
