@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from engine.body.shapes import BodyShape
-from engine.errors import InvalidInput, RegistrationFailed
+from engine.errors import InvalidInput
 from engine.io.stagefiles import load_arrays, pack_masks, save_arrays, unpack_masks
 from engine.render.camera import Camera
 from engine.settings import Settings
@@ -282,10 +282,9 @@ def prepare(
     perceive_s = time.perf_counter() - t0
     r = run_stages_0_2_full(
         reference, video, s.foreground, s.calibration, s.alignment, perception=perception,
-        on_progress=on_progress,
+        min_person_fraction=s.perception.min_detected_fraction, on_progress=on_progress,
     )  # fmt: skip
     fg, camera, aligned, timing = r.foreground, r.camera, r.alignment, r.timing_s
-    check_person_found(fg.flags, perception, s.perception.min_detected_fraction)
     h, w = video.frames.shape[1:3]
     return Prepared(
         reference_path=str(reference_path), video_path=str(video_path),
@@ -306,33 +305,6 @@ def prepare(
         keypoint_offsets=None if perception is None else r.keypoint_offsets,
         perception_model="" if perception is None else perception.model,
     )  # fmt: skip
-
-
-def check_person_found(
-    flags: Sequence[Sequence[str]], perception: Any, min_fraction: float
-) -> None:
-    """Refuse a video where nobody is found, rather than fit the reference to nothing.
-
-    A frame shows a person when the pose model detected one there or stage 0's region is not
-    flagged ``no_person`` (a pose model trained on photographs may miss a rendered or
-    unusual figure that the background difference still finds; what is then found but is not
-    a body ends ``poor_fit``, :func:`assess_fit`).
-
-    Raises
-    ------
-    RegistrationFailed
-        Fewer than ``min_fraction`` of the frames show a person.
-    """
-    seen = np.array(["no_person" not in f for f in flags], bool)
-    if perception is not None:
-        seen |= np.asarray(perception.detected, bool)
-    found = float(seen.mean())
-    if found < min_fraction:
-        raise RegistrationFailed(
-            f"We could not find a person in this video (only {100 * found:.0f} % of the "
-            "frames show one). Film the whole body, from head to feet, in good light, "
-            "standing out from the background."
-        )
 
 
 def candidates(

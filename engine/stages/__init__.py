@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from engine.body.shapes import BodyShape
-from engine.errors import InvalidInput
+from engine.errors import InvalidInput, RegistrationFailed
 from engine.render.camera import Camera
 from engine.stages.alignment import AlignmentResult, AlignmentSettings, align, dp_path
 from engine.stages.calibration import (
@@ -35,7 +35,7 @@ from engine.stages.perception import Perception, keypoint_offsets, readings
 __all__ = [
     "AlignmentResult", "AlignmentSettings", "CalibrationSettings", "ForegroundResult",
     "ForegroundSettings", "Stages02", "align", "calibrate", "dp_path", "extract_foreground",
-    "fit_body_shape", "run_stages_0_2", "run_stages_0_2_full",
+    "check_person_found", "fit_body_shape", "run_stages_0_2", "run_stages_0_2_full",
 ]  # fmt: skip
 
 
@@ -106,6 +106,7 @@ def run_stages_0_2_full(
     *,
     align_with_fitted_shape: bool = False,
     perception: Perception | None = None,
+    min_person_fraction: float = 0.0,
     on_progress: Callable[[str, float], None] | None = None,
 ) -> Stages02:
     """Stages 0-2 of the thesis (4.1, 4.2, 4.5) on a loaded reference and video.
@@ -140,7 +141,8 @@ def run_stages_0_2_full(
     InvalidInput
         The calibration frame is out of range (or any stage's own validation).
     RegistrationFailed
-        The camera cannot be calibrated.
+        Nobody is found in the video (:func:`check_person_found`), or the camera cannot be
+        calibrated.
     """
     joints = reference.motion.joints
     c0 = calibration.reference_frame
@@ -160,6 +162,7 @@ def run_stages_0_2_full(
                             learned=None if perception is None else perception.mask,
                             on_progress=on_progress)  # fmt: skip
     timing["foreground"] = time.perf_counter() - t0
+    check_person_found(fg.flags, perception, min_person_fraction)
     t0 = time.perf_counter()
     k = calibration.video_frame
     # the outline only: interior image edges (ForegroundSettings.interior_edges) are for
@@ -219,6 +222,33 @@ def run_stages_0_2_full(
         timing["alignment"] += time.perf_counter() - t0
     views = {round(float(np.degrees(r[2].azimuth)), 6): float(r[0]) for r in results}
     return Stages02(fg, camera, shape, factors, result, timing, views, offsets)
+
+
+def check_person_found(
+    flags: Sequence[Sequence[str]], perception: Perception | None, min_fraction: float
+) -> None:
+    """Refuse a video where nobody is found, rather than fit the reference to nothing.
+
+    A frame shows a person when the pose model detected one there or stage 0's region is not
+    flagged ``no_person`` (a pose model trained on photographs may miss a rendered or
+    unusual figure that the background difference still finds; what is then found but is not
+    a body ends ``poor_fit``, :func:`assess_fit`).
+
+    Raises
+    ------
+    RegistrationFailed
+        Fewer than ``min_fraction`` of the frames show a person.
+    """
+    seen = np.array(["no_person" not in f for f in flags], bool)
+    if perception is not None:
+        seen |= np.asarray(perception.detected, bool)
+    found = float(seen.mean())
+    if found < min_fraction:
+        raise RegistrationFailed(
+            f"We could not find a person in this video (only {100 * found:.0f} % of the "
+            "frames show one). Film the whole body, from head to feet, in good light, "
+            "standing out from the background."
+        )
 
 
 def _refine_camera(

@@ -190,9 +190,9 @@ def test_a_video_with_nobody_in_it_fails_with_a_plain_message(case_dir, tmp_path
     wall = rng.integers(60, 200, (120, 160, 3), dtype=np.uint8)
     frames = np.repeat(wall[None], 16, 0)
     frames = np.clip(frames + rng.normal(0, 1.5, frames.shape), 0, 255).astype(np.uint8)
-    video = write_video(tmp_path / "empty.mp4", frames, 15.0)
+    write_video(tmp_path / "empty.mp4", frames, 15.0)
     with pytest.raises(RegistrationFailed, match="could not find a person"):
-        prepare(case_dir["reference"], video, SETTINGS)
+        prepare(case_dir["reference"], tmp_path / "empty.mp4", SETTINGS)
 
 
 def test_a_region_that_is_not_a_body_ends_poor_fit_not_ok(prepared) -> None:

@@ -15,6 +15,7 @@ from engine.stages.foreground import ForegroundSettings, extract_foreground
 from tests.conftest import BENCH_CASES, CMU
 
 P1 = BENCH_CASES / "P1_warp_64_29"
+P3 = BENCH_CASES / "P3_warp_64_17_grey"
 
 
 def test_synthetic_blob_on_static_background(rng):
@@ -66,33 +67,54 @@ def test_validation():
         extract_foreground(np.zeros((1, 4, 4, 3), np.uint8))
 
 
-@pytest.mark.skipif(not P1.exists(), reason="public cases not beside the clone")
-@pytest.mark.xfail(
-    strict=True,
-    reason="measured IoU vs the truth body with fitted widths 0.81 (P1) / 0.73-0.76 (P2): the dark "
-    "shoes, which hardly move, print into the background and are missed",
-)
-def test_public_case_p1_matches_truth_body():
+def _against_truth_body(case, n_frames: int, learned: bool) -> tuple[float, float]:
+    """Mean precision and recall of stage 0's regions against the truth's capsule body.
+
+    The generator's mesh is wider than our capsules (clothes, shoes): precision is the share
+    of the region within the capsule render dilated by 4 px, recall the share of the
+    (undilated) capsule body the region covers, every 8th frame.
+    """
     from engine.io.bvh import load_reference
     from engine.io.video import read_video
+    from engine.stages.perception import perceive
 
-    truth = json.loads((P1 / "truth.json").read_text())
+    truth = json.loads((case / "truth.json").read_text())
     cam = Camera.from_dict(truth["camera"])
-    shape = load_reference(P1 / "reference.bvh").shape
-    v = read_video(P1 / "video.mp4", max_frames=40)
-    fg = extract_foreground(v.frames)
-    # The generator's mesh is wider than our capsules (clothes, shoes): compare the
-    # capsule render dilated by 4 px with the silhouette, and require the silhouette to
-    # cover the (undilated) capsule body.
+    shape = load_reference(case / "reference.bvh").shape
+    v = read_video(case / "video.mp4", max_frames=n_frames)
+    mask = perceive(v.frames).mask if learned else None
+    fg = extract_foreground(v.frames, learned=mask)
     prec, rec = [], []
-    for f in truth["frames"][:40:8]:
+    for f in truth["frames"][:n_frames:8]:
         m = capsules.silhouettes(np.array(f["joints_3d"])[None], shape, cam)[0]
         big = cv2.dilate(m.astype(np.uint8), np.ones((9, 9), np.uint8)) > 0
         s = fg.silhouettes[f["t"]]
         prec.append((s & big).sum() / s.sum())
         rec.append((s & m).sum() / m.sum())
-    assert np.mean(prec) >= 0.9
-    assert np.mean(rec) >= 0.9
+    return float(np.mean(prec)), float(np.mean(rec))
+
+
+@pytest.mark.skipif(not P1.exists(), reason="public cases not beside the clone")
+def test_public_case_p1_matches_truth_body():
+    """Issue 20: the learned mask fused with the thesis' evidence finds the whole body.
+
+    The thesis' region alone missed the dark shoes, which hardly move and print into the
+    background (precision 0.98, recall 0.81 on these frames): the strict xfail this test was.
+    """
+    prec, rec = _against_truth_body(P1, 40, learned=True)
+    assert prec >= 0.9 and rec >= 0.9, (prec, rec)
+
+
+@pytest.mark.skipif(not P3.exists(), reason="public cases not beside the clone")
+def test_grey_clothes_on_a_grey_wall_keep_their_legs():
+    """P3: a squat in light grey against a grey wall he never leaves. The background model
+    holds the legs, and the thesis' region loses them (recall 0.35 over the video,
+    ``benchmarks/perception.py``); fused with the learned mask it keeps them. The whole
+    video: the pose model finds him only once he moves, then tracks him back to the start."""
+    thesis = _against_truth_body(P3, 127, learned=False)
+    fused = _against_truth_body(P3, 127, learned=True)
+    assert thesis[1] < 0.6  # what the issue reported: the legs are lost
+    assert fused[0] >= 0.9 and fused[1] >= 0.9, fused
 
 
 @pytest.mark.skipif(not (CMU / "64_29.bvh").exists(), reason="CMU data not beside the clone")
