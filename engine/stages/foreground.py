@@ -481,6 +481,22 @@ def grabcut_seeded(frame: np.ndarray, labels: np.ndarray, *, iterations: int = 2
     return (gc == cv2.GC_FGD) | (gc == cv2.GC_PR_FGD)
 
 
+def _difference(
+    frame: np.ndarray, background: Background, s: ForegroundSettings
+) -> tuple[np.ndarray, np.ndarray]:
+    """Colour distance of a frame (H, W, 3) to the background and each pixel's threshold,
+    both (H, W): ``max(threshold, noise_factor * noise)``, and for never-seen pixels the
+    distance to the nearest known background colours against ``never_factor`` x threshold."""
+    lab = _lab(frame[None], s.blur_sigma_px)[0]
+    d = _distance(lab, background.lab)
+    never = background.never
+    if never.any():
+        d[never] = _distance(lab[never][:, None], background.never_samples).min(1)
+    thr = np.maximum(s.threshold, s.noise_factor * background.noise)
+    thr[never] = s.threshold * s.never_factor
+    return d, thr
+
+
 def segment_frame(
     frame: np.ndarray, background: Background, settings: ForegroundSettings
 ) -> tuple[np.ndarray, np.ndarray, int, dict]:
@@ -502,13 +518,8 @@ def segment_frame(
     """
     s = settings
     t0 = time.perf_counter()
-    lab = _lab(frame[None], s.blur_sigma_px)[0]
-    d = _distance(lab, background.lab)
+    d, thr = _difference(frame, background, s)
     never = background.never
-    if never.any():
-        d[never] = _distance(lab[never][:, None], background.never_samples).min(1)
-    thr = np.maximum(s.threshold, s.noise_factor * background.noise)
-    thr[never] = s.threshold * s.never_factor
     raw = d > thr
     strong = d > 2 * thr
     sure_bg = d < 0.5 * thr
@@ -577,13 +588,8 @@ def fuse_learned_mask(
     t0 = time.perf_counter()
     h = frame.shape[0]
     person = learned > 127
-    lab = _lab(frame[None], s.blur_sigma_px)[0]
-    d = _distance(lab, background.lab)
+    d, thr = _difference(frame, background, s)
     never = background.never
-    if never.any():
-        d[never] = _distance(lab[never][:, None], background.never_samples).min(1)
-    thr = np.maximum(s.threshold, s.noise_factor * background.noise)
-    thr[never] = s.threshold * s.never_factor
     raw = d > thr
     seen_fg = (d > 2 * thr) & ~never
     seen_bg = (d < 0.5 * thr) & ~never
