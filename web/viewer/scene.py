@@ -20,6 +20,9 @@ import viser
 from engine.body.skeleton import BONE_CHILD, BONE_PARENT
 from engine.report import ERROR_RED_DEG, MISFIT_RGB, error_colors
 
+#: What an unsure bone fades to (see :func:`bone_colours`).
+UNSURE_GREY = np.array([0.6, 0.6, 0.6])
+
 REFERENCE_RGB = (110, 130, 200)
 CANDIDATE_RGB = (190, 190, 190)
 #: The candidate that fits the video best, shown where the video disagrees (image_misfit).
@@ -49,6 +52,20 @@ def _rgb_pairs(rgb01: np.ndarray) -> np.ndarray:
     """Per-bone colours (16, 3) in [0, 1] -> (16, 2, 3) uint8 for line segments."""
     c = np.clip(np.asarray(rgb01) * 255, 0, 255).astype(np.uint8)
     return np.repeat(c[:, None], 2, 1)
+
+
+def bone_colours(frame: dict[str, Any]) -> np.ndarray:
+    """Per-bone colours (16, 3) in [0, 1] of a result frame: the error's colour, washed out
+    towards grey as the bone's range over the candidates the video cannot tell apart
+    (``bone_error_range_deg``) widens, fully at ``ERROR_RED_DEG`` (x 0.7): a bright red bone
+    is a sure fault, a pale one a guess about depth."""
+    rgb = error_colors(np.asarray(frame["bone_errors_deg"], float))
+    rng = frame.get("bone_error_range_deg")
+    if not rng:
+        return rgb
+    width = np.ptp(np.asarray(rng, float), axis=1)
+    k = 0.7 * np.clip(width / ERROR_RED_DEG, 0.0, 1.0)[:, None]
+    return rgb * (1 - k) + UNSURE_GREY * k
 
 
 @dataclass
@@ -96,7 +113,7 @@ class ViewerScene:
         with self.server.atomic():
             h["reference"].points = _segments_of(ref).astype(np.float32)
             h["performer"].points = _segments_of(sel).astype(np.float32)
-            h["performer"].colors = _rgb_pairs(error_colors(np.asarray(f["bone_errors_deg"])))
+            h["performer"].colors = _rgb_pairs(bone_colours(f))
             if len(others):
                 h["candidates"].points = _segments_of(others).reshape(-1, 2, 3).astype(np.float32)
             else:
@@ -170,7 +187,7 @@ def _legend_html() -> str:
         "<div><span style='color:rgb(110,130,200)'>&#9632;</span> reference "
         "<span style='color:#aaa'>&#9632;</span> other candidates</div>"
         f"<div><span style='color:rgb{MISFIT_RGB}'>&#9632;</span> what the video shows where it "
-        "disagrees</div></div>"
+        "disagrees</div><div>paler: the video cannot tell the bone's depth</div></div>"
     )
 
 
