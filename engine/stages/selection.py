@@ -129,6 +129,13 @@ class SelectionSettings:
         stage 0's region exceeds this, the result's status is ``poor_fit``
         (:func:`engine.pipeline.assess_fit`): the region is not the performer. Beyond the
         thesis.
+    poor_fit_joint, poor_fit_frames : float
+        When more than ``poor_fit_frames`` of the frames have a confident keypoint farther
+        than ``poor_fit_joint`` of the body's height from its reported joint, the status is
+        ``poor_fit`` too: the reported motion leaves the body (several repetitions, another
+        motion). Measured (:func:`engine.pipeline.assess_fit`): 0-3 % of the frames on the
+        six public cases, 13 % on the real golf clip, 25 % and 38 % on the real squat clips
+        (several repetitions against one).
     """
 
     window_k: float = 10.0
@@ -149,6 +156,8 @@ class SelectionSettings:
     error_smoothing_s: float = 0.05
     error_median_frames: int = 3
     poor_fit_region: float = 0.45
+    poor_fit_joint: float = 0.3
+    poor_fit_frames: float = 0.2
     uncertainty_margin: float = 0.01
 
 

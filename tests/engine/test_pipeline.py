@@ -11,6 +11,7 @@ from engine.io.bvh import write_bvh
 from engine.io.case import write_case
 from engine.io.result import validate_result
 from engine.pipeline import CandidateChunk, Prepared, analyze, candidates, prepare, select
+from engine.stages.selection import SelectionSettings
 from engine.synth import SynthSettings, synthesize
 from engine.types import Motion, Segments
 from tests.synthetic import StubReference, swing_joints
@@ -215,8 +216,35 @@ def test_a_region_that_is_not_a_body_ends_poor_fit_not_ok(prepared) -> None:
     assert good["summary"]["status"] != "poor_fit"
     assert good["summary"]["fit"]["region_mismatch_median"] < 0.3
     doc2 = {"summary": {"status": "ok", "messages": []}}
-    assess_fit(doc2, np.stack([c[0] for c in chunks[0].candidates]), bad, 1.0)
-    assert doc2["summary"]["status"] == "ok"  # the threshold decides
+    lax = SelectionSettings(poor_fit_region=1.0, poor_fit_frames=1.0)
+    assess_fit(doc2, np.stack([c[0] for c in chunks[0].candidates]), bad, lax)
+    assert doc2["summary"]["status"] == "ok"  # the thresholds decide
+
+
+def test_reported_motion_that_leaves_the_keypoints_ends_poor_fit(prepared) -> None:
+    """Where the reported postures leave the detected body in many frames (a video of
+    several repetitions against one), the result says so."""
+    import dataclasses
+
+    from engine.pipeline import assess_fit
+
+    postures = prepared.reference_joints[prepared.C]
+    kp = prepared.camera.project(postures)
+    conf = np.ones(kp.shape[:2])
+    good = dataclasses.replace(prepared, keypoints=kp, keypoint_confidence=conf,
+                               keypoint_offsets=np.zeros((17, 2)))  # fmt: skip
+    doc = {"summary": {"status": "ok", "messages": []}}
+    assess_fit(doc, postures, good, SelectionSettings())
+    assert doc["summary"]["status"] == "ok"
+    assert doc["summary"]["fit"]["keypoint_off_frames"] == 0
+    moved = kp.copy()
+    height = np.ptp(kp[0, :, 1])
+    moved[::2, 3] += [0.0, 0.6 * height]  # an ankle far below in half the frames
+    bad = dataclasses.replace(good, keypoints=moved)
+    doc = {"summary": {"status": "ok", "messages": []}}
+    assess_fit(doc, postures, bad, SelectionSettings())
+    assert doc["summary"]["status"] == "poor_fit"
+    assert "several repetitions" in doc["summary"]["messages"][0]
 
 
 def test_the_thesis_preset_runs_without_the_pose_model(case_dir) -> None:
