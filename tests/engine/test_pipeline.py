@@ -248,8 +248,15 @@ def test_reported_motion_that_leaves_the_keypoints_ends_poor_fit(prepared) -> No
 
 
 def test_the_thesis_preset_runs_without_the_pose_model(case_dir) -> None:
+    import json
+
     p = prepare(case_dir["reference"], case_dir["video"], {**SETTINGS, "preset": "thesis"})
     assert p.keypoints is None and p.perception_model == ""
+    # and still finds the timing as it did before the pose model (the figure of
+    # test_candidates_command_runs_stages_0_to_3_and_writes_a_scorable_result)
+    truth = json.loads(open(case_dir["truth"]).read())
+    true_c = np.array([f["reference_frame"] for f in truth["frames"]])
+    assert np.abs(p.C - true_c).max() <= 8
     q = prepare(case_dir["reference"], case_dir["video"], SETTINGS)
     assert q.keypoints is not None and q.keypoints.shape == (q.n_frames, 17, 2)
     assert q.perception_model.startswith("mediapipe")
