@@ -239,12 +239,15 @@ def prepare(
     settings: Settings | dict | None = None,
     *,
     frames: tuple[int, int] | None = None,
+    mapping: dict[str, str] | None = None,
+    units_to_m: float | None = None,
     on_progress: ProgressFn | None = None,
 ) -> Prepared:
     """Stages 0-2 (thesis 4.1, 4.2, 4.5) from files.
 
     ``frames = (a, b)`` analyses video frames a..b-1 only; result frame numbers still count
-    the file's frames.
+    the file's frames. ``mapping`` and ``units_to_m`` say how to read the BVH
+    (:func:`engine.io.bvh.load_reference`).
 
     Raises
     ------
@@ -259,7 +262,7 @@ def prepare(
 
     s = _settings(settings)
     t0 = time.perf_counter()
-    reference = load_reference(reference_path)
+    reference = load_reference(reference_path, mapping=mapping, units_to_m=units_to_m)
     video = read_video(video_path, height=s.working_height, limits=s.video)
     offset = 0
     if frames is not None:
@@ -624,11 +627,16 @@ def analyze(
     settings: Settings | dict | None = None,
     *,
     frames: tuple[int, int] | None = None,
+    mapping: dict[str, str] | None = None,
+    units_to_m: float | None = None,
     on_progress: ProgressFn | None = None,
 ) -> dict:
-    """The whole registration (thesis chapter 4) in this process -> the result document."""
+    """The whole registration (thesis chapter 4) in this process -> the result document.
+
+    Parameters as :func:`prepare`."""
     s = _settings(settings)
-    prepared = prepare(reference_path, video_path, s, frames=frames, on_progress=on_progress)
+    prepared = prepare(reference_path, video_path, s, frames=frames, mapping=mapping,
+                       units_to_m=units_to_m, on_progress=on_progress)  # fmt: skip
     chunks = [
         candidates(prepared, r, s, on_progress=on_progress)
         for r in prepared.chunks(max(1, -(-prepared.n_frames // s.chunk_frames)))

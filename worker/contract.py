@@ -40,6 +40,11 @@ class AnalysisJob:
     work_dir: str
     settings: dict = field(default_factory=dict)
     domain_path: str | None = None
+    #: How the reference BVH's joints map onto ours (our joint -> BVH joint) and its metres
+    #: per file unit, as the club gave them at upload (None: the engine's name tables and
+    #: its guess). Carried as data: the engine's domain file does not hold them.
+    reference_mapping: dict[str, str] | None = None
+    reference_units_to_m: float | None = None
 
     def to_json(self) -> dict:
         return asdict(self)

@@ -300,8 +300,10 @@ def run_prepare(
     progress.report("prepare", _SPAN["prepare"][0], "preparing")
     started = time.monotonic()
     prepared = pipeline.prepare(
-        job.reference_path, job.video_path, job.settings or None, on_progress=progress
-    )
+        job.reference_path, job.video_path, job.settings or None,
+        mapping=job.reference_mapping, units_to_m=job.reference_units_to_m,
+        on_progress=progress,
+    )  # fmt: skip
     check_cancel(job)
     write_atomic(paths.prepared, prepared.save)
     _stage_done(job, "prepare", started)

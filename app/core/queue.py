@@ -47,7 +47,8 @@ class CeleryQueue:
 
 
 def analysis_job(analysis, reference, engine_preset: str = "") -> AnalysisJob:
-    """The worker payload of an analysis row (paths and settings only)."""
+    """The worker payload of an analysis row: paths, settings, and how to read the BVH."""
+    domain = reference.domain_config or {}
     return AnalysisJob(
         analysis_id=analysis.id,
         reference_path=reference.bvh_path,
@@ -55,6 +56,8 @@ def analysis_job(analysis, reference, engine_preset: str = "") -> AnalysisJob:
         work_dir=analysis.work_dir,
         domain_path=reference.domain_path,
         settings={"preset": engine_preset} if engine_preset else {},
+        reference_mapping=domain.get("mapping") or None,
+        reference_units_to_m=domain.get("units_to_m"),
     )
 
 

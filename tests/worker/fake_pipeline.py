@@ -65,7 +65,8 @@ class CandidateChunk:
             return cls(frames=z["frames"], values=z["values"])
 
 
-def prepare(reference_path, video_path, settings=None, *, on_progress=None):
+def prepare(reference_path, video_path, settings=None, *, mapping=None, units_to_m=None,
+            on_progress=None):  # fmt: skip
     s = _settings(settings)
     CALLS.append(("prepare", str(video_path)))
     if s.get("fake_fail") == "invalid":
