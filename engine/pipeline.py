@@ -510,7 +510,10 @@ def assess_fit(
         )
     if far is not None:
         off = np.nan_to_num(far, nan=0.0) > settings.poor_fit_joint
-        summary["fit"]["keypoint_worst_per_frame"] = np.round(far, 3).tolist()
+        # JSON has no NaN: a frame without a confident keypoint says null
+        summary["fit"]["keypoint_worst_per_frame"] = [
+            round(float(x), 3) if np.isfinite(x) else None for x in far
+        ]
         summary["fit"]["keypoint_off_frames"] = int(off.sum())
         if message is None and off.mean() > settings.poor_fit_frames:
             message = (

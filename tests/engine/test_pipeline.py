@@ -114,8 +114,11 @@ def test_candidates_do_not_depend_on_the_chunking(prepared) -> None:
 
 
 def test_analyze_gives_a_valid_result(case_dir) -> None:
+    import json
+
     doc = analyze(case_dir["reference"], case_dir["video"], SETTINGS)
     validate_result(doc)
+    json.dumps(doc, allow_nan=False)  # a browser's JSON.parse refuses NaN
     n = len(doc["frames"])
     assert n == doc["video"]["frames"] >= 10
     ref = [f["reference_frame"] for f in doc["frames"]]
@@ -225,6 +228,7 @@ def test_reported_motion_that_leaves_the_keypoints_ends_poor_fit(prepared) -> No
     """Where the reported postures leave the detected body in many frames (a video of
     several repetitions against one), the result says so."""
     import dataclasses
+    import json
 
     from engine.pipeline import assess_fit
 
@@ -245,6 +249,14 @@ def test_reported_motion_that_leaves_the_keypoints_ends_poor_fit(prepared) -> No
     assess_fit(doc, postures, bad, SelectionSettings())
     assert doc["summary"]["status"] == "poor_fit"
     assert "several repetitions" in doc["summary"]["messages"][0]
+    # a frame where the pose model saw nobody: null, not NaN (JSON has none)
+    blind = conf.copy()
+    blind[1] = 0.0
+    doc = {"summary": {"status": "ok", "messages": []}}
+    assess_fit(doc, postures, dataclasses.replace(good, keypoint_confidence=blind),
+               SelectionSettings())  # fmt: skip
+    assert doc["summary"]["fit"]["keypoint_worst_per_frame"][1] is None
+    json.dumps(doc, allow_nan=False)
 
 
 def test_the_thesis_preset_runs_without_the_pose_model(case_dir) -> None:
