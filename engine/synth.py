@@ -399,10 +399,45 @@ def synthesize(
     InvalidInput
         A reference that is too short, segments outside it, fps above the reference's.
     """
-    from engine.io.bvh import Reference, sample_at, sample_reference
-    from engine.render.mesh import MeshRenderer, textured_background
-
     motion, shape = reference.motion, reference.shape
+    segments = _checked_segments(motion, settings, segments)
+    allowed = resolve_parts(
+        settings.error_parts if settings.error_parts is not None else ARTICULABLE_PARTS
+    )
+    warp, knots_video, speeds = time_warp(
+        segments, motion.fps, settings.fps, settings.warp_strength, rng
+    )
+    truncated = settings.max_frames is not None and len(warp) > settings.max_frames
+    if truncated:
+        warp = warp[: settings.max_frames]
+    ref = _reference_at(reference, warp)
+    art = _wrong_segments(warp, segments, shape.offsets, allowed, settings, rng)
+    joints = articulate(ref, shape.offsets, art.angles, art.axes)
+    if settings.yaw_deg:
+        vec = np.einsum("ij,nbj->nbi", rot_y(np.radians(settings.yaw_deg)), bone_vectors(joints))
+        joints = _joints_from_bones(joints[:, 0], vec)
+    camera = fit_camera(joints, shape, settings)
+    frames, masks = _film(joints, shape, camera, settings, rng)
+    truth = _truth(
+        motion, settings, segments, warp, knots_video, speeds, ref, joints, camera,
+        art.wrong, art.seg_parts, art.seg_of, truncated,
+    )  # fmt: skip
+    return SynthCase(
+        frames=frames,
+        masks=masks,
+        joints_3d=joints,
+        warp=warp,
+        camera=camera,
+        fps=float(settings.fps),
+        truth=truth,
+    )
+
+
+def _checked_segments(
+    motion: Motion, settings: SynthSettings, segments: Segments | None
+) -> Segments:
+    """The reference segments to warp (:func:`reference_segments` when omitted), after
+    checking the reference's joints (T >= 3, 17, 3) and frame rate against ``settings``."""
     if motion.joints.ndim != 3 or motion.joints.shape[1:] != (17, 3) or motion.frames < 3:
         raise InvalidInput(f"reference joints must be (T >= 3, 17, 3), got {motion.joints.shape}")
     _check(settings.fps <= motion.fps, "fps", f"<= the reference's {motion.fps:g}", settings.fps)
@@ -413,32 +448,62 @@ def synthesize(
             f"segments {segments.starts}..{segments.end} lie outside the reference's "
             f"{motion.frames} frames"
         )
-    allowed = (
-        resolve_parts(settings.error_parts)
-        if settings.error_parts is not None
-        else resolve_parts(ARTICULABLE_PARTS)
-    )
+    return segments
 
-    warp, knots_video, speeds = time_warp(
-        segments, motion.fps, settings.fps, settings.warp_strength, rng
-    )
-    truncated = settings.max_frames is not None and len(warp) > settings.max_frames
-    if truncated:
-        warp = warp[: settings.max_frames]
+
+def _reference_at(reference: ReferenceLike, warp: np.ndarray) -> np.ndarray:
+    """The reference postures B_C(t'), shape (T', 17, 3), at the fractional frames ``warp``."""
+    from engine.io.bvh import Reference, sample_at, sample_reference
+
     # the file's own rotations interpolated, as the public truth does (rigid-part slerp
     # would bend CMU's spine and hips by up to 20 deg)
     if isinstance(reference, Reference):
-        ref = sample_reference(reference, warp)  # (T', 17, 3)
-    else:  # a reference built in memory (no file): interpolate on the 17-joint body
-        ref = sample_at(motion, shape, warp)
+        return sample_reference(reference, warp)
+    # a reference built in memory (no file): interpolate on the 17-joint body
+    return sample_at(reference.motion, reference.shape, warp)
 
-    # table 2.1: which segments are wrong, and how
+
+@dataclass(frozen=True)
+class _Articulation:
+    """Which segments the performer gets wrong, and how (thesis table 2.1, 2.1.3 item 5).
+
+    Attributes
+    ----------
+    angles : ndarray, shape (T', 12)
+        Rotation of each part per video frame, radians (0 where the performer is right).
+    axes : ndarray, shape (12, 3)
+        Rotation axis of each part in its default-posture frame.
+    wrong : ndarray of bool, shape (n_segments,)
+    seg_parts : list of list of int
+        The parts articulated in each segment, sorted (empty when it is right).
+    seg_of : ndarray of int, shape (T',)
+        The reference segment each video frame falls in.
+    """
+
+    angles: np.ndarray
+    axes: np.ndarray
+    wrong: np.ndarray
+    seg_parts: list[list[int]]
+    seg_of: np.ndarray
+
+
+def _wrong_segments(
+    warp: np.ndarray,
+    segments: Segments,
+    offsets: np.ndarray,
+    allowed: tuple[int, ...],
+    settings: SynthSettings,
+    rng: np.random.Generator,
+) -> _Articulation:
+    """Choose ``settings.n_wrong`` wrong segments and, in each, parts among ``allowed`` to
+    rotate by +-``error_deg``, ramping in and out (2.1.3 items 6-7; errors of different
+    segments are independent). ``warp`` (T',) is C(t'); ``offsets`` (16, 3) the body's."""
     n_seg = len(segments.starts)
     knots_ref = np.array([*segments.starts, segments.end], dtype=float)
     seg_of = np.clip(np.searchsorted(knots_ref, warp, side="right") - 1, 0, n_seg - 1)
     wrong = np.zeros(n_seg, dtype=bool)
     wrong[rng.choice(n_seg, size=min(settings.n_wrong, n_seg), replace=False)] = True
-    axes = _random_axes(shape.offsets, rng)
+    axes = _random_axes(offsets, rng)
     angles = np.zeros((len(warp), N_PARTS))
     seg_parts: list[list[int]] = [[] for _ in range(n_seg)]
     amp = np.radians(settings.error_deg)
@@ -450,53 +515,38 @@ def synthesize(
         w = _ramp_window(u, settings.ramp) * (seg_of == k)
         for p in parts:
             angles[:, p] += rng.choice([-1.0, 1.0]) * amp * w
-    joints = articulate(ref, shape.offsets, angles, axes)
-    if settings.yaw_deg:
-        vec = np.einsum("ij,nbj->nbi", rot_y(np.radians(settings.yaw_deg)), bone_vectors(joints))
-        joints = _joints_from_bones(joints[:, 0], vec)
+    return _Articulation(angles, axes, wrong, seg_parts, seg_of)
 
-    camera = fit_camera(joints, shape, settings)
+
+def _film(
+    joints: np.ndarray,
+    shape: BodyShape,
+    camera: Camera,
+    settings: SynthSettings,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Render the postures (T', 17, 3) as the mesh body: RGB frames (T', H, W, 3) uint8 over
+    the background, with sensor noise, and the true silhouettes (T', H, W)."""
+    from engine.render.mesh import MeshRenderer, textured_background
+
     H, W = settings.height, settings.width
+    # the horizon (wall meets floor) lies 15 % of the image above the lowest ankle (joints 3, 6)
     floor_v = float(camera.project(joints[:, [3, 6]]).max(axis=(0, 1))[1])
     bg = (
         textured_background(H, W, rng, horizon=min(floor_v - 0.15 * H, H - 2.0))
         if settings.background
         else np.full((H, W, 3), 128, dtype=np.uint8)
     )
-    frames = np.empty((len(warp), H, W, 3), dtype=np.uint8)
-    masks = np.empty((len(warp), H, W), dtype=bool)
+    frames = np.empty((len(joints), H, W, 3), dtype=np.uint8)
+    masks = np.empty((len(joints), H, W), dtype=bool)
     with MeshRenderer(W, H) as renderer:
-        for i in range(len(warp)):
+        for i in range(len(joints)):
             img, masks[i] = renderer.render(joints[i], shape, camera, background=bg)
             if settings.noise_sigma > 0:
                 noisy = img + rng.normal(0.0, settings.noise_sigma, img.shape)
                 img = np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
             frames[i] = img
-
-    truth = _truth(
-        motion,
-        settings,
-        segments,
-        warp,
-        knots_video,
-        speeds,
-        ref,
-        joints,
-        camera,
-        wrong,
-        seg_parts,
-        seg_of,
-        truncated,
-    )
-    return SynthCase(
-        frames=frames,
-        masks=masks,
-        joints_3d=joints,
-        warp=warp,
-        camera=camera,
-        fps=float(settings.fps),
-        truth=truth,
-    )
+    return frames, masks
 
 
 def _truth(

@@ -78,3 +78,86 @@ class Segments:
         """(start, end) inclusive pairs, one per segment."""
         ends = [s for s in self.starts[1:]] + [self.end]
         return list(zip(self.starts, ends, strict=True))
+
+
+@dataclass(frozen=True)
+class SegmentReport:
+    """One performed segment (thesis 4.7; 6.6 status).
+
+    Attributes
+    ----------
+    reference_start, reference_end : int
+        Reference boundary frames (inclusive).
+    performer_start, performer_end : int
+        Performer boundary frames (inclusive).
+    initial_performer_start : int
+        The stage-2 estimate of ``performer_start`` (4.7.1 step 1).
+    name : str
+    status : str
+        "ok", "missing" or "extra_motion" (6.6).
+    boundary_found : bool
+        Whether the start boundary satisfied the velocity condition (else best-posture fallback).
+    tempo : float
+        Performer duration / reference duration (seconds over seconds).
+    mean_error : float
+        Mean eps_t' over the frames the segment owns (its end frame, when another segment
+        starts there, belongs to that one; see
+        :func:`engine.stages.selection.owned_frames`), radians.
+    bone_mean_errors : ndarray, shape (16,)
+        Radians, over the same frames.
+    worst_frame : int
+        Video frame of the largest eps_t' among them.
+    cost : float
+        E_F of eq. 4.24 along the chosen path.
+    """
+
+    reference_start: int
+    reference_end: int
+    performer_start: int
+    performer_end: int
+    initial_performer_start: int
+    name: str
+    status: str
+    boundary_found: bool
+    tempo: float
+    mean_error: float
+    bone_mean_errors: np.ndarray
+    worst_frame: int
+    cost: float
+
+
+@dataclass(frozen=True)
+class Selection:
+    """Output of stage 4 (:func:`engine.stages.selection.select_and_refine`), the shape the
+    result writer (:func:`engine.io.result.build_result`) reads.
+
+    Attributes
+    ----------
+    performer_segments : Segments
+        Performer boundaries (video frames), names from the reference segments.
+    C : ndarray of int, shape (T',)
+        Refined temporal correspondence C(t').
+    selected : ndarray of int, shape (T',)
+        Selected candidate l(t').
+    joints : ndarray, shape (T', 17, 3)
+        Selected postures B'_{t' l(t')}.
+    posture_error : ndarray, shape (T',)
+        eps_t' = d_B(B_C(t'), B'_t'), radians.
+    bone_errors : ndarray, shape (T', 16)
+        Per-bone angle, radians.
+    flags : tuple of tuple of str
+        Per video frame.
+    segments : tuple of SegmentReport
+    messages : tuple of str
+        Overall messages for the performer (6.6, 6.7).
+    """
+
+    performer_segments: Segments
+    C: np.ndarray
+    selected: np.ndarray
+    joints: np.ndarray
+    posture_error: np.ndarray
+    bone_errors: np.ndarray
+    flags: tuple[tuple[str, ...], ...]
+    segments: tuple[SegmentReport, ...]
+    messages: tuple[str, ...] = field(default=())

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -200,96 +200,150 @@ def _floats(tokens: list[str], name: str, line: int, what: str) -> list[float]:
     return out
 
 
-def _parse_hierarchy(lines: list[str], start: int, name: str):
-    names: list[str] = []
-    parents: list[int] = []
-    offsets: list[list[float]] = []
-    channels: list[list[str]] = []
-    ends: list[bool] = []
-    has_offset: list[bool] = []
-    stack: list[int] = []
+#: What :func:`_parse_hierarchy` reads, per node in file order (N nodes): names, parents,
+#: offsets (N, 3) in file units, channel names and end-site flags.
+_Hierarchy = tuple[list[str], list[int], list[list[float]], list[list[str]], list[bool]]
+
+
+@dataclass
+class _HierarchyReader:
+    """The HIERARCHY section read so far, one line at a time (mutable while parsing).
+
+    Nodes are appended in file order (depth first). ``stack`` holds the nodes whose braces
+    are open; ``pending`` is a node just declared whose ``{`` has not come yet.
+    """
+
+    name: str
+    names: list[str] = field(default_factory=list)
+    parents: list[int] = field(default_factory=list)
+    offsets: list[list[float]] = field(default_factory=list)
+    channels: list[list[str]] = field(default_factory=list)
+    ends: list[bool] = field(default_factory=list)
+    has_offset: list[bool] = field(default_factory=list)
+    stack: list[int] = field(default_factory=list)
     pending: int | None = None
+
+    def read(self, key: str, tokens: list[str], line: str, i: int, opens: bool) -> None:
+        """One non-empty line ``i`` (its trailing ``{`` removed, ``opens`` says there was one)."""
+        if key in ("ROOT", "JOINT") or (key == "END" and len(tokens) > 1):
+            self._node(key, tokens, line, i, opens)
+        elif key == "{":
+            if self.pending is None:
+                raise _err(self.name, i, "'{' without a joint")
+            self.stack.append(self.pending)
+            self.pending = None
+        elif key == "}":
+            if not self.stack:
+                raise _err(self.name, i, "unmatched '}'")
+            self.stack.pop()
+        elif key == "OFFSET":
+            self._offset(tokens, i)
+        elif key == "CHANNELS":
+            self._channels(tokens, i)
+        else:
+            raise _err(self.name, i, f"unexpected {tokens[0]!r} in the HIERARCHY section")
+
+    def finish(self, i: int) -> _Hierarchy:
+        """The hierarchy at the MOTION line ``i``, once every brace is closed."""
+        if self.stack or self.pending is not None:
+            raise _err(self.name, i, "MOTION before the hierarchy's braces are closed")
+        if not self.names:
+            raise _err(self.name, i, "the hierarchy has no ROOT joint")
+        for n, ok in zip(self.names, self.has_offset, strict=True):
+            if not ok:
+                raise InvalidInput(f"{self.name}: joint {n!r} has no OFFSET")
+        return self.names, self.parents, self.offsets, self.channels, self.ends
+
+    def _node(self, key: str, tokens: list[str], line: str, i: int, opens: bool) -> None:
+        """A ROOT, JOINT or End Site line: a new node under the innermost open one."""
+        self._check_parent(key, tokens[0], i)
+        parent = self.stack[-1] if self.stack else -1
+        jname = self._end_name(parent) if key == "END" else _joint_name(tokens, line)
+        if not jname:
+            raise _err(self.name, i, f"{tokens[0]} without a name")
+        self.names.append(jname)
+        self.parents.append(parent)
+        self.offsets.append([0.0, 0.0, 0.0])
+        self.channels.append([])
+        self.ends.append(key == "END")
+        self.has_offset.append(False)
+        self.pending = len(self.names) - 1
+        if opens:
+            self.stack.append(self.pending)
+            self.pending = None
+
+    def _check_parent(self, key: str, word: str, i: int) -> None:
+        """One ROOT at the top level; every other node inside a joint that is no End Site."""
+        if key == "ROOT":
+            if self.stack or self.names:
+                raise _err(self.name, i, "only one ROOT is supported, at the top level")
+        elif not self.stack:
+            raise _err(self.name, i, f"{word} outside of a ROOT")
+        elif self.ends[self.stack[-1]]:
+            raise _err(self.name, i, "an End Site cannot have children")
+
+    def _end_name(self, parent: int) -> str:
+        """``<parent>/End``, then ``<parent>/End2`` ... for a joint's further end sites."""
+        base = f"{self.names[parent]}/End"
+        k = sum(1 for n in self.names if n.startswith(base))
+        return base if k == 0 else f"{base}{k + 1}"
+
+    def _offset(self, tokens: list[str], i: int) -> None:
+        """``OFFSET x y z`` of the innermost open node, file units."""
+        if not self.stack:
+            raise _err(self.name, i, "OFFSET outside of a joint")
+        if len(tokens) != 4:
+            raise _err(self.name, i, f"OFFSET needs 3 numbers, got {len(tokens) - 1}")
+        self.offsets[self.stack[-1]] = _floats(tokens[1:], self.name, i, "OFFSET values")
+        self.has_offset[self.stack[-1]] = True
+
+    def _channels(self, tokens: list[str], i: int) -> None:
+        """``CHANNELS n name ...`` of the innermost open joint (an End Site has none)."""
+        if not self.stack or self.ends[self.stack[-1]]:
+            raise _err(self.name, i, "CHANNELS outside of a joint")
+        try:
+            n_chans = int(tokens[1])
+        except (IndexError, ValueError):
+            raise _err(self.name, i, "CHANNELS needs a count") from None
+        chans = tokens[2:]
+        if n_chans != len(chans):
+            raise _err(self.name, i, f"CHANNELS says {n_chans} channels but lists {len(chans)}")
+        # channel names are matched case-insensitively and stored in their canonical spelling
+        canon = {c.lower(): c for c in _CHANNELS}
+        bad = [c for c in chans if c.lower() not in canon]
+        if bad:
+            raise _err(self.name, i, f"unknown channel {bad[0]!r}")
+        self.channels[self.stack[-1]] = [canon[c.lower()] for c in chans]
+
+
+def _joint_name(tokens: list[str], line: str) -> str:
+    """The name after ROOT or JOINT (it may contain spaces); "" when there is none."""
+    return line.split(None, 1)[1].strip() if len(tokens) > 1 else ""
+
+
+def _parse_hierarchy(lines: list[str], start: int, name: str) -> tuple[int, _Hierarchy]:
+    """Read the HIERARCHY section from line ``start`` up to the MOTION line.
+
+    Returns the MOTION line's index and the nodes (:data:`_Hierarchy`); raises
+    :class:`InvalidInput` naming the line of the first problem.
+    """
+    reader = _HierarchyReader(name)
     for i in range(start, len(lines)):
         line = lines[i].strip()
         if not line:
             continue
-        opens = line.endswith("{") and line != "{"
+        opens = line.endswith("{") and line != "{"  # "JOINT name {" on one line
         if opens:
             line = line[:-1].strip()
         tokens = line.split()
         key = tokens[0].upper()
         if key == "MOTION":
-            if stack or pending is not None:
-                raise _err(name, i, "MOTION before the hierarchy's braces are closed")
-            if not names:
-                raise _err(name, i, "the hierarchy has no ROOT joint")
-            for n, ok in zip(names, has_offset, strict=True):
-                if not ok:
-                    raise InvalidInput(f"{name}: joint {n!r} has no OFFSET")
-            return i, (names, parents, offsets, channels, ends)
-        if pending is not None and key != "{":
-            raise _err(name, i, f"expected '{{' after {names[pending]!r}, got {line!r}")
-        if key in ("ROOT", "JOINT") or (key == "END" and len(tokens) > 1):
-            is_end = key == "END"
-            if key == "ROOT":
-                if stack or names:
-                    raise _err(name, i, "only one ROOT is supported, at the top level")
-            elif not stack:
-                raise _err(name, i, f"{tokens[0]} outside of a ROOT")
-            elif ends[stack[-1]]:
-                raise _err(name, i, "an End Site cannot have children")
-            parent = stack[-1] if stack else -1
-            if is_end:
-                base = f"{names[parent]}/End"
-                k = sum(1 for n in names if n.startswith(base))
-                jname = base if k == 0 else f"{base}{k + 1}"
-            else:
-                jname = line.split(None, 1)[1].strip() if len(tokens) > 1 else ""
-                if not jname:
-                    raise _err(name, i, f"{tokens[0]} without a name")
-            names.append(jname)
-            parents.append(parent)
-            offsets.append([0.0, 0.0, 0.0])
-            channels.append([])
-            ends.append(is_end)
-            has_offset.append(False)
-            pending = len(names) - 1
-            if opens:
-                stack.append(pending)
-                pending = None
-        elif key == "{":
-            if pending is None:
-                raise _err(name, i, "'{' without a joint")
-            stack.append(pending)
-            pending = None
-        elif key == "}":
-            if not stack:
-                raise _err(name, i, "unmatched '}'")
-            stack.pop()
-        elif key == "OFFSET":
-            if not stack:
-                raise _err(name, i, "OFFSET outside of a joint")
-            if len(tokens) != 4:
-                raise _err(name, i, f"OFFSET needs 3 numbers, got {len(tokens) - 1}")
-            offsets[stack[-1]] = _floats(tokens[1:], name, i, "OFFSET values")
-            has_offset[stack[-1]] = True
-        elif key == "CHANNELS":
-            if not stack or ends[stack[-1]]:
-                raise _err(name, i, "CHANNELS outside of a joint")
-            try:
-                n_chans = int(tokens[1])
-            except (IndexError, ValueError):
-                raise _err(name, i, "CHANNELS needs a count") from None
-            chans = tokens[2:]
-            if n_chans != len(chans):
-                raise _err(name, i, f"CHANNELS says {n_chans} channels but lists {len(chans)}")
-            canon = {c.lower(): c for c in _CHANNELS}
-            bad = [c for c in chans if c.lower() not in canon]
-            if bad:
-                raise _err(name, i, f"unknown channel {bad[0]!r}")
-            channels[stack[-1]] = [canon[c.lower()] for c in chans]
-        else:
-            raise _err(name, i, f"unexpected {tokens[0]!r} in the HIERARCHY section")
+            return i, reader.finish(i)
+        if reader.pending is not None and key != "{":
+            raise _err(
+                name, i, f"expected '{{' after {reader.names[reader.pending]!r}, got {line!r}"
+            )
+        reader.read(key, tokens, line, i, opens)
     raise InvalidInput(f"{name}: no MOTION section (the file ends inside the hierarchy)")
 
 

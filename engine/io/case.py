@@ -10,18 +10,42 @@ import json
 import os
 import shutil
 from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
 
 from engine.errors import InvalidInput
 from engine.io.encode import write_video
-from engine.synth import SynthCase
 
 
-def write_case(case: SynthCase, out_dir: str | Path, reference_path: str | Path) -> dict:
+class CaseLike(Protocol):
+    """What :func:`write_case` reads of a case (e.g. :class:`engine.synth.SynthCase`).
+
+    A protocol rather than an import, so that ``io`` (the edge) does not depend on
+    :mod:`engine.synth`, which sits above it.
+    """
+
+    # read-only: a frozen dataclass (engine.synth.SynthCase) must satisfy the protocol
+    @property
+    def frames(self) -> np.ndarray:
+        """RGB video frames, uint8, shape (T', H, W, 3)."""
+        ...
+
+    @property
+    def fps(self) -> float: ...
+
+    @property
+    def truth(self) -> dict[str, Any]:
+        """``truth.json`` content (DESIGN.md "Synthetic cases")."""
+        ...
+
+
+def write_case(case: CaseLike, out_dir: str | Path, reference_path: str | Path) -> dict:
     """Write a synthetic case folder.
 
     Parameters
     ----------
-    case : SynthCase
+    case : CaseLike
         From :func:`engine.synth.synthesize`.
     out_dir : str or Path
         Folder to create (or fill; existing case files are replaced).

@@ -19,7 +19,7 @@ import numpy as np
 from engine.body.skeleton import BONE_NAMES, JOINTS
 from engine.errors import InvalidInput
 from engine.render.camera import Camera
-from engine.stages.selection import Selection
+from engine.types import SegmentReport, Selection
 
 SCHEMA_PATH = Path(__file__).with_name("result_schema.json")
 
@@ -77,62 +77,17 @@ def build_result(
         raise InvalidInput(
             f"candidates: expected {n} frames like the selection, got {len(candidates)}"
         )
-    deg_bones = np.degrees(selection.bone_errors)
-    deg_eps = np.degrees(selection.posture_error)
+    # thesis 6.8: the domain's score weighs the raw bone errors; they stay as they are
     score = np.degrees(domain.score(selection.bone_errors)) if domain is not None else None
-    joints_2d = camera.project(selection.joints)
-    frames = []
-    for i in range(n):
-        f: dict[str, Any] = {
-            "t": int(i + video_frame_offset),
-            "reference_frame": int(selection.C[i] + reference_frame_offset),
-            "joints_3d": _r(selection.joints[i], 4),
-            "joints_2d": _r(joints_2d[i], 2),
-            "candidates": _r(candidates[i], 4),
-            "selected": int(selection.selected[i]),
-            "posture_error_deg": float(np.round(deg_eps[i], 3)),
-            "bone_errors_deg": _r(deg_bones[i], 3),
-            "flags": list(selection.flags[i]),
-        }
-        if score is not None:
-            f["score_deg"] = float(np.round(score[i], 3))
-        frames.append(f)
+    frames = _frame_docs(
+        selection, candidates, camera.project(selection.joints), score,
+        reference_frame_offset, video_frame_offset,
+    )  # fmt: skip
     names = list(domain.segment_names) if domain is not None and domain.segment_names else []
-    segments = []
-    for j, s in enumerate(selection.segments):
-        bone_deg = np.degrees(s.bone_mean_errors)
-        seg: dict[str, Any] = {
-            "reference_start": s.reference_start + reference_frame_offset,
-            "reference_end": s.reference_end + reference_frame_offset,
-            "performer_start": s.performer_start + video_frame_offset,
-            "performer_end": s.performer_end + video_frame_offset,
-            "mean_error_deg": float(np.round(np.degrees(s.mean_error), 3)),
-            "bone_mean_errors_deg": _r(bone_deg, 3),
-            "name": names[j] if j < len(names) else (s.name or f"segment {j + 1}"),
-            "status": s.status,
-            "tempo": float(np.round(s.tempo, 4)),
-            "worst_frame": s.worst_frame + video_frame_offset,
-            "worst_bones": [BONE_NAMES[b] for b in np.argsort(-bone_deg)[:3]],
-            "initial_performer_start": s.initial_performer_start + video_frame_offset,
-            "boundary_found": s.boundary_found,
-            "path_cost": float(np.round(s.cost, 6)),
-        }
-        if domain is not None:
-            seg["score_deg"] = float(np.round(np.degrees(domain.score(s.bone_mean_errors)), 3))
-        segments.append(seg)
-    messages = list(selection.messages)
-    status = "ok"
-    if any("very different" in m for m in messages):
-        status = "very_different"
-    elif any(s.status != "ok" for s in selection.segments):
-        status = "segments_mismatch"
-    summary: dict[str, Any] = {
-        "status": status,
-        "mean_error_deg": float(np.round(deg_eps.mean(), 3)),
-        "messages": messages,
-    }
-    if score is not None:
-        summary["score_deg"] = float(np.round(score.mean(), 3))
+    segments = [
+        _segment_doc(j, s, names, domain, reference_frame_offset, video_frame_offset)
+        for j, s in enumerate(selection.segments)
+    ]
     timing = {k: float(v) for k, v in timing_s.items()}
     timing.setdefault("total", float(sum(timing.values())))
     cam = camera.to_dict()
@@ -151,10 +106,93 @@ def build_result(
         "camera": cam,
         "frames": frames,
         "segments": segments,
-        "summary": summary,
+        "summary": _summary(selection, score),
         "domain": domain.to_dict() if domain is not None else None,
         "timing_s": timing,
     }  # fmt: skip
+
+
+def _frame_docs(
+    selection: Selection,
+    candidates: Sequence[np.ndarray],
+    joints_2d: np.ndarray,
+    score: np.ndarray | None,
+    reference_frame_offset: int,
+    video_frame_offset: int,
+) -> list[dict[str, Any]]:
+    """The ``frames`` entries: one per video frame of ``selection``, with the selected
+    joints projected (``joints_2d``, shape (T', 17, 2), pixels) and the domain's ``score``
+    (T',) in degrees when there is one."""
+    deg_bones = np.degrees(selection.bone_errors)
+    deg_eps = np.degrees(selection.posture_error)
+    frames = []
+    for i in range(selection.C.shape[0]):
+        f: dict[str, Any] = {
+            "t": int(i + video_frame_offset),
+            "reference_frame": int(selection.C[i] + reference_frame_offset),
+            "joints_3d": _r(selection.joints[i], 4),
+            "joints_2d": _r(joints_2d[i], 2),
+            "candidates": _r(candidates[i], 4),
+            "selected": int(selection.selected[i]),
+            "posture_error_deg": float(np.round(deg_eps[i], 3)),
+            "bone_errors_deg": _r(deg_bones[i], 3),
+            "flags": list(selection.flags[i]),
+        }
+        if score is not None:
+            f["score_deg"] = float(np.round(score[i], 3))
+        frames.append(f)
+    return frames
+
+
+def _segment_doc(
+    j: int,
+    s: SegmentReport,
+    names: list[str],
+    domain: Any | None,
+    reference_frame_offset: int,
+    video_frame_offset: int,
+) -> dict[str, Any]:
+    """The ``segments`` entry of segment ``j``: frames offset to the files' numbering, errors
+    in degrees, the domain's name for it when it has one (``names``)."""
+    bone_deg = np.degrees(s.bone_mean_errors)
+    seg: dict[str, Any] = {
+        "reference_start": s.reference_start + reference_frame_offset,
+        "reference_end": s.reference_end + reference_frame_offset,
+        "performer_start": s.performer_start + video_frame_offset,
+        "performer_end": s.performer_end + video_frame_offset,
+        "mean_error_deg": float(np.round(np.degrees(s.mean_error), 3)),
+        "bone_mean_errors_deg": _r(bone_deg, 3),
+        "name": names[j] if j < len(names) else (s.name or f"segment {j + 1}"),
+        "status": s.status,
+        "tempo": float(np.round(s.tempo, 4)),
+        "worst_frame": s.worst_frame + video_frame_offset,
+        "worst_bones": [BONE_NAMES[b] for b in np.argsort(-bone_deg)[:3]],
+        "initial_performer_start": s.initial_performer_start + video_frame_offset,
+        "boundary_found": s.boundary_found,
+        "path_cost": float(np.round(s.cost, 6)),
+    }
+    if domain is not None:
+        seg["score_deg"] = float(np.round(np.degrees(domain.score(s.bone_mean_errors)), 3))
+    return seg
+
+
+def _summary(selection: Selection, score: np.ndarray | None) -> dict[str, Any]:
+    """The ``summary``: one status (a very different performer first, thesis 6.7, then
+    missing or extra segments, 6.6), the mean error and the messages."""
+    messages = list(selection.messages)
+    status = "ok"
+    if any("very different" in m for m in messages):
+        status = "very_different"
+    elif any(s.status != "ok" for s in selection.segments):
+        status = "segments_mismatch"
+    summary: dict[str, Any] = {
+        "status": status,
+        "mean_error_deg": float(np.round(np.degrees(selection.posture_error).mean(), 3)),
+        "messages": messages,
+    }
+    if score is not None:
+        summary["score_deg"] = float(np.round(score.mean(), 3))
+    return summary
 
 
 @lru_cache(maxsize=1)
@@ -208,8 +246,9 @@ def write_result(doc: Mapping[str, Any], path: str | os.PathLike) -> Path:
     return out
 
 
-def read_result(path: str | os.PathLike) -> dict[str, Any]:
-    """Read and validate a result file.
+def read_result_doc(path: str | os.PathLike) -> dict[str, Any]:
+    """Read a result file as its JSON document, validated against the schema (the typed
+    reader is :func:`engine.io.result_reader.read_result`).
 
     Raises
     ------
@@ -241,7 +280,7 @@ __all__ = [
     "SCHEMA_PATH",
     "build_result",
     "load_schema",
-    "read_result",
+    "read_result_doc",
     "validate_result",
     "write_result",
     "write_text",

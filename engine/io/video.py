@@ -275,37 +275,13 @@ def read_video(
     scale = 1.0 if height == 0 else height / info.height
     out_w = info.width if height == 0 else max(2, int(round(info.width * scale / 2.0)) * 2)
     out_h = info.height if height == 0 else int(height)
-    frames: list[np.ndarray] = []
-    times: list[float] = []
-    container = _open(p)
-    try:
-        stream = container.streams.video[0]
-        stream.thread_type = "AUTO"
-        try:
-            for frame in container.decode(stream):
-                rgb = _rotate(frame.to_ndarray(format="rgb24"), int(frame.rotation or 0))
-                if rgb.shape[:2] != (out_h, out_w):
-                    interp = cv2.INTER_AREA if scale < 1 else cv2.INTER_LINEAR
-                    rgb = cv2.resize(rgb, (out_w, out_h), interpolation=interp)
-                frames.append(rgb)
-                times.append(float(frame.time) if frame.time is not None else np.nan)
-                if max_frames is not None and len(frames) >= max_frames:
-                    break
-        except Exception:  # a truncated tail: keep what decoded, judged below
-            pass
-    finally:
-        container.close()
+    frames, times = _decode(p, (out_h, out_w), scale, max_frames)
     if len(frames) < limits.min_frames:
         raise InvalidInput(
             f"{p.name} has {len(frames)} decodable frame(s); at least {limits.min_frames} are "
             "needed"
         )
-    t = np.asarray(times, dtype=float)
-    if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
-        rate = info.fps if info.fps > 0 else 30.0
-        t = np.arange(len(frames)) / rate
-    t = t - t[0]
-    fps = info.fps if info.fps > 0 else (len(t) - 1) / t[-1]
+    t, fps = _timestamps(times, info.fps)
     if t[-1] > limits.max_duration_s:
         raise InvalidInput(
             f"{p.name} lasts {t[-1]:.1f} s; the limit is {limits.max_duration_s:.0f} s"
@@ -319,6 +295,52 @@ def read_video(
         scale=float(scale),
         name=p.stem,
     )
+
+
+def _decode(
+    p: Path, size: tuple[int, int], scale: float, max_frames: int | None
+) -> tuple[list[np.ndarray], list[float]]:
+    """Every frame of ``p`` (up to ``max_frames``) as RGB (H, W, 3) uint8 at ``size`` (H, W),
+    turned upright, and its presentation time in seconds (NaN when the file has none).
+
+    ``scale`` (< 1 shrinks) picks the interpolation. A truncated tail ends the decoding
+    quietly: the caller judges whether enough frames came out.
+    """
+    frames: list[np.ndarray] = []
+    times: list[float] = []
+    interp = cv2.INTER_AREA if scale < 1 else cv2.INTER_LINEAR
+    container = _open(p)
+    try:
+        stream = container.streams.video[0]
+        stream.thread_type = "AUTO"
+        try:
+            for frame in container.decode(stream):
+                rgb = _rotate(frame.to_ndarray(format="rgb24"), int(frame.rotation or 0))
+                if rgb.shape[:2] != size:
+                    rgb = cv2.resize(rgb, (size[1], size[0]), interpolation=interp)
+                frames.append(rgb)
+                times.append(float(frame.time) if frame.time is not None else np.nan)
+                if max_frames is not None and len(frames) >= max_frames:
+                    break
+        except Exception:  # a truncated tail: keep what decoded, judged by the caller
+            pass
+    finally:
+        container.close()
+    return frames, times
+
+
+def _timestamps(times: list[float], rate: float) -> tuple[np.ndarray, float]:
+    """Frame times (T',) in seconds from the first frame, and the average frame rate.
+
+    The file's own times when they are all there and increasing; else a constant ``rate``
+    (30 when the container gives none). A missing ``rate`` is measured from the times.
+    """
+    t = np.asarray(times, dtype=float)
+    if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
+        t = np.arange(len(times)) / (rate if rate > 0 else 30.0)
+    t = t - t[0]
+    fps = rate if rate > 0 else (len(t) - 1) / t[-1]
+    return t, fps
 
 
 def video_from_frames(frames: np.ndarray, fps: float, name: str = "") -> Video:

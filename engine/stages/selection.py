@@ -18,7 +18,7 @@ radians (degrees only in :mod:`engine.io.result`).
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.ndimage import gaussian_filter1d, median_filter
@@ -26,7 +26,7 @@ from scipy.ndimage import gaussian_filter1d, median_filter
 from engine.body.kinematics import bone_directions
 from engine.body.skeleton import JOINT_INDEX, N_JOINTS
 from engine.errors import InvalidInput
-from engine.types import Segments
+from engine.types import SegmentReport, Segments, Selection
 
 ProgressFn = Callable[[str, float], None]
 
@@ -161,87 +161,6 @@ class SelectionSettings:
     uncertainty_margin: float = 0.01
 
 
-@dataclass(frozen=True)
-class SegmentReport:
-    """One performed segment (thesis 4.7; 6.6 status).
-
-    Attributes
-    ----------
-    reference_start, reference_end : int
-        Reference boundary frames (inclusive).
-    performer_start, performer_end : int
-        Performer boundary frames (inclusive).
-    initial_performer_start : int
-        The stage-2 estimate of ``performer_start`` (4.7.1 step 1).
-    name : str
-    status : str
-        "ok", "missing" or "extra_motion" (6.6).
-    boundary_found : bool
-        Whether the start boundary satisfied the velocity condition (else best-posture fallback).
-    tempo : float
-        Performer duration / reference duration (seconds over seconds).
-    mean_error : float
-        Mean eps_t' over the frames the segment owns (its end frame, when another segment
-        starts there, belongs to that one; see :func:`owned_frames`), radians.
-    bone_mean_errors : ndarray, shape (16,)
-        Radians, over the same frames.
-    worst_frame : int
-        Video frame of the largest eps_t' among them.
-    cost : float
-        E_F of eq. 4.24 along the chosen path.
-    """
-
-    reference_start: int
-    reference_end: int
-    performer_start: int
-    performer_end: int
-    initial_performer_start: int
-    name: str
-    status: str
-    boundary_found: bool
-    tempo: float
-    mean_error: float
-    bone_mean_errors: np.ndarray
-    worst_frame: int
-    cost: float
-
-
-@dataclass(frozen=True)
-class Selection:
-    """Output of stage 4.
-
-    Attributes
-    ----------
-    performer_segments : Segments
-        Performer boundaries (video frames), names from the reference segments.
-    C : ndarray of int, shape (T',)
-        Refined temporal correspondence C(t').
-    selected : ndarray of int, shape (T',)
-        Selected candidate l(t').
-    joints : ndarray, shape (T', 17, 3)
-        Selected postures B'_{t' l(t')}.
-    posture_error : ndarray, shape (T',)
-        eps_t' = d_B(B_C(t'), B'_t'), radians.
-    bone_errors : ndarray, shape (T', 16)
-        Per-bone angle, radians.
-    flags : tuple of tuple of str
-        Per video frame.
-    segments : tuple of SegmentReport
-    messages : tuple of str
-        Overall messages for the performer (6.6, 6.7).
-    """
-
-    performer_segments: Segments
-    C: np.ndarray
-    selected: np.ndarray
-    joints: np.ndarray
-    posture_error: np.ndarray
-    bone_errors: np.ndarray
-    flags: tuple[tuple[str, ...], ...]
-    segments: tuple[SegmentReport, ...]
-    messages: tuple[str, ...] = field(default=())
-
-
 # --------------------------------------------------------------------------- validation
 
 
@@ -283,6 +202,21 @@ def _validate(
     return cands, ref, C0
 
 
+def _check_settings(s: SelectionSettings, video_fps: float) -> None:
+    """Refuse settings (and the video rate) stage 4 cannot work with, naming the parameter."""
+    unknown = [j for j in s.boundary_joints if j not in JOINT_INDEX]
+    if unknown:
+        raise InvalidInput(f"settings.boundary_joints: unknown joints {unknown}")
+    if not np.isfinite(video_fps) or video_fps <= 0:
+        raise InvalidInput(f"video_fps: expected a positive number, got {video_fps}")
+    if not s.error_smoothing_s >= 0:  # also refuses NaN
+        raise InvalidInput(f"settings.error_smoothing_s must be >= 0, got {s.error_smoothing_s}")
+    if s.error_median_frames < 1 or s.error_median_frames % 2 == 0:
+        raise InvalidInput(
+            f"settings.error_median_frames must be odd and >= 1, got {s.error_median_frames}"
+        )
+
+
 def _pad(candidates: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """Candidates padded to (T', K_max, 17, 3) and a validity mask (T', K_max)."""
     k = max(c.shape[0] for c in candidates)
@@ -317,6 +251,56 @@ def _image_cost(
 def _angles(dirs_a: np.ndarray, dirs_b: np.ndarray) -> np.ndarray:
     """Bone angles from unit bone directions (..., 16, 3) -> (..., 16), radians."""
     return np.arccos(np.clip(np.sum(dirs_a * dirs_b, -1), -1.0, 1.0))
+
+
+@dataclass(frozen=True)
+class _Evidence:
+    """What stages 4.7.1 and 4.7.2 compare, prepared once per call.
+
+    Attributes
+    ----------
+    cand_joints : ndarray, shape (T', K, 17, 3)
+        Candidates padded to K = max K_t' (:func:`_pad`).
+    cand_dirs : ndarray, shape (T', K, 16, 3)
+        Their unit bone directions.
+    valid : ndarray of bool, shape (T', K)
+        Real candidates within ``image_margin`` of their frame's best.
+    image : ndarray, shape (T', K)
+        Image-evidence cost mu (d_S - min_k d_S) (:func:`_image_cost`); 0 without d_S.
+    ref_dirs : ndarray, shape (T, 16, 3)
+        Unit bone directions of the reference B_t.
+    C0 : ndarray, shape (T',)
+        Stage 2's correspondence (may be fractional).
+    """
+
+    cand_joints: np.ndarray
+    cand_dirs: np.ndarray
+    valid: np.ndarray
+    image: np.ndarray
+    ref_dirs: np.ndarray
+    C0: np.ndarray
+
+    @property
+    def n_frames(self) -> int:
+        """T'."""
+        return int(self.C0.shape[0])
+
+
+def _evidence(
+    cands: list[np.ndarray],
+    ref: np.ndarray,
+    C0: np.ndarray,
+    d_s: Sequence[np.ndarray] | None,
+    s: SelectionSettings,
+) -> _Evidence:
+    """Pad the candidates (K_t', 17, 3) per frame and take bone directions of them and of
+    the reference (T, 17, 3); candidates the image rules out become invalid."""
+    cand_joints, valid = _pad(cands)
+    image = _image_cost(d_s, valid, s)
+    valid = valid & np.isfinite(image)
+    return _Evidence(
+        cand_joints, bone_directions(cand_joints), valid, image, bone_directions(ref), C0
+    )
 
 
 # --------------------------------------------------------------------------- 4.7.1
@@ -406,13 +390,9 @@ def _find_boundary(
     lo: int,
     hi: int,
     t_ref: int,
-    ref_dirs: np.ndarray,
-    cand_dirs: np.ndarray,
-    cand_joints: np.ndarray,
-    valid: np.ndarray,
+    ev: _Evidence,
     s: SelectionSettings,
     joint_ids: np.ndarray,
-    image: np.ndarray,
     initial: int,
 ) -> tuple[int, bool]:
     """Performer boundary for reference boundary ``t_ref`` in [lo, hi].
@@ -420,17 +400,17 @@ def _find_boundary(
     Thesis 4.7.1 steps 3-5, eq. 4.23; returns (frame, whether the velocity condition held).
     """
     seqs = _smooth_sequences(
-        cand_dirs[lo : hi + 1], valid[lo : hi + 1], np.radians(s.smooth_threshold_deg)
+        ev.cand_dirs[lo : hi + 1], ev.valid[lo : hi + 1], np.radians(s.smooth_threshold_deg)
     )
     frames = np.arange(lo, hi + 1)
     best: tuple[float, int] | None = None
     fallback: tuple[float, int] | None = None
     for seq in seqs:
-        joints = cand_joints[frames, seq]
+        joints = ev.cand_joints[frames, seq]
         rel = joints[:, joint_ids] - joints[:, :1]
-        err = _angles(ref_dirs[t_ref][None], cand_dirs[frames, seq]).mean(-1)  # d_B(B_t, B'_i)
+        err = _angles(ev.ref_dirs[t_ref][None], ev.cand_dirs[frames, seq]).mean(-1)  # d_B
         # image evidence and the pull towards stage 2's boundary (see SelectionSettings)
-        err = err + image[frames, seq]
+        err = err + ev.image[frames, seq]
         err = err + np.radians(s.anchor_deg_per_frame) * np.abs(frames - initial)
         for tau in _boundary_frames(rel, np.cos(np.radians(s.direction_change_deg)), s.pause_speed):
             if best is None or err[tau] < best[0]:
@@ -448,6 +428,124 @@ def _initial_boundary(C0: np.ndarray, t_ref: int) -> int:
     """First video frame whose C reaches ``t_ref`` (4.7.1 step 1)."""
     hit = np.flatnonzero(C0 >= t_ref)
     return int(hit[0]) if hit.size else len(C0) - 1
+
+
+@dataclass(frozen=True)
+class _Segmentation:
+    """The performer's segments (4.7.1) and their 6.6 status, one entry per reference segment.
+
+    Attributes
+    ----------
+    bounds : list of (int, int)
+        (start, end) reference frames of each segment, inclusive.
+    starts : list of int
+        First video frame of each segment (monotone; ``starts[0] == 0``).
+    spans : list of (int, int)
+        (start, end) video frames of each segment, inclusive; consecutive ones share a frame.
+    initial : list of int
+        Stage 2's start of each segment (:func:`_initial_boundary`), then the last frame.
+    found : list of bool
+        Whether each start satisfied the velocity condition (the first always does).
+    tempo : ndarray, shape (n_segments,)
+        Performer duration / reference duration.
+    status : list of str
+        "ok", "missing" or "extra_motion".
+    names : tuple of str
+        The reference segments' names ("" when unnamed).
+    """
+
+    bounds: list[tuple[int, int]]
+    starts: list[int]
+    spans: list[tuple[int, int]]
+    initial: list[int]
+    found: list[bool]
+    tempo: np.ndarray
+    status: list[str]
+    names: tuple[str, ...]
+
+
+def _segment_names(segments: Segments) -> tuple[str, ...]:
+    """One name per segment: the given ones, padded (or cut) with ""."""
+    n = len(segments.starts)
+    names = tuple(segments.names) or ("",) * n
+    if len(names) != n:
+        names = tuple(names[i] if i < len(names) else "" for i in range(n))
+    return names
+
+
+def _performer_starts(
+    ev: _Evidence,
+    bounds: list[tuple[int, int]],
+    s: SelectionSettings,
+    on_progress: ProgressFn | None,
+) -> tuple[list[int], list[int], list[bool]]:
+    """Performer boundaries (thesis 4.7.1), one per interior reference boundary.
+
+    Each is searched within ``s.boundary_window`` of stage 2's and never before the previous
+    one, so the segments stay in temporal order (2.1.6 B). Returns (initial, starts, found):
+    stage 2's starts plus the last frame, the chosen starts, and whether the velocity
+    condition held at each.
+    """
+    n_v = ev.n_frames
+    joint_ids = np.array([JOINT_INDEX[j] for j in s.boundary_joints])
+    initial = [0] + [_initial_boundary(ev.C0, t) for t, _ in bounds[1:]] + [n_v - 1]
+    starts = [0]
+    found = [True]
+    for j, (t_ref, _) in enumerate(bounds[1:], start=1):
+        lo = max(starts[-1], initial[j] - s.boundary_window)
+        hi = min(n_v - 1, initial[j] + s.boundary_window)
+        lo = min(lo, hi)
+        tau, ok = _find_boundary(lo, hi, t_ref, ev, s, joint_ids, initial[j])
+        starts.append(max(tau, starts[-1]))
+        found.append(ok)
+        if on_progress:
+            on_progress("selection", 0.2 * j / max(len(bounds) - 1, 1))
+    return initial, starts, found
+
+
+def _segment_status(
+    spans: list[tuple[int, int]],
+    bounds: list[tuple[int, int]],
+    fps_ratio: float,
+    s: SelectionSettings,
+) -> tuple[np.ndarray, list[str]]:
+    """Tempo (n_segments,) of each performed segment and its status (thesis 6.6).
+
+    A segment far slower than the median tempo, or too short, is "missing"; one far faster
+    is "extra_motion": reported rather than forced to match.
+    """
+    tempo = np.array(
+        [
+            (pe - ps) * fps_ratio / max(re - rs, 1)
+            for (ps, pe), (rs, re) in zip(spans, bounds, strict=True)
+        ]
+    )
+    median = float(np.median(tempo[tempo > 0])) if (tempo > 0).any() else 1.0
+    status = []
+    for i, (ps, pe) in enumerate(spans):
+        if pe - ps < s.min_segment_frames or tempo[i] < s.missing_tempo * median:
+            status.append("missing")
+        elif tempo[i] > s.extra_tempo * median:
+            status.append("extra_motion")
+        else:
+            status.append("ok")
+    return tempo, status
+
+
+def _segment_performer(
+    ev: _Evidence,
+    reference_segments: Segments,
+    fps_ratio: float,
+    s: SelectionSettings,
+    on_progress: ProgressFn | None,
+) -> _Segmentation:
+    """Thesis 4.7.1 (performer boundaries) and 6.6 (missing or extra segments)."""
+    bounds = reference_segments.bounds()
+    initial, starts, found = _performer_starts(ev, bounds, s, on_progress)
+    spans = list(zip(starts, starts[1:] + [ev.n_frames - 1], strict=True))
+    tempo, status = _segment_status(spans, bounds, fps_ratio, s)
+    names = _segment_names(reference_segments)
+    return _Segmentation(bounds, starts, spans, initial, found, tempo, status, names)
 
 
 # --------------------------------------------------------------------------- 4.7.2
@@ -539,6 +637,129 @@ def _segment_table(ref_dirs: np.ndarray, cand_dirs: np.ndarray, valid: np.ndarra
     for i in range(cand_dirs.shape[0]):
         out[i] = _angles(ref_dirs[:, None], cand_dirs[i][None]).mean(-1)
     return np.where(valid[:, None, :], out, np.inf)
+
+
+def _segment_path(
+    ev: _Evidence,
+    span: tuple[int, int],
+    bound: tuple[int, int],
+    fps_ratio: float,
+    s: SelectionSettings,
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """C (n',) relative to the reference start, candidates l (n',) and the path cost of one
+    segment (thesis 4.7.2), the performer's frames ``span`` against the reference's ``bound``.
+
+    The cost table is d_c of eq. 4.25 plus the image evidence and the anchor to stage 2's C
+    (beyond the thesis, see :class:`SelectionSettings`).
+    """
+    (ps, pe), (rs, re) = span, bound
+    n_seg_v, n_seg_r = pe - ps + 1, re - rs + 1
+    table = _segment_table(
+        ev.ref_dirs[rs : re + 1], ev.cand_dirs[ps : pe + 1], ev.valid[ps : pe + 1]
+    )
+    table = table + ev.image[ps : pe + 1, None, :]
+    if s.anchor_deg_per_frame > 0:
+        off = np.abs(np.arange(n_seg_r)[None, :] - (ev.C0[ps : pe + 1, None] - rs))
+        table = table + np.radians(s.anchor_deg_per_frame) * (off / fps_ratio)[..., None]
+    min_step = 1 if n_seg_r >= n_seg_v else 0
+    window = max(1, int(np.ceil(s.window_k * n_seg_r / max(n_seg_v, 1))))
+    band = max(window, int(np.ceil(s.band * n_seg_r)))
+    c_loc, l_loc, cost = refine_segment(table, window=window, band=band, min_step=min_step)
+    if not np.isfinite(cost):  # band too narrow for this segment: search the whole segment
+        c_loc, l_loc, cost = refine_segment(table, window=n_seg_r, band=n_seg_r, min_step=0)
+    return c_loc, l_loc, cost
+
+
+def _refine_segments(
+    ev: _Evidence,
+    seg: _Segmentation,
+    fps_ratio: float,
+    s: SelectionSettings,
+    on_progress: ProgressFn | None,
+) -> tuple[np.ndarray, np.ndarray, list[float]]:
+    """The DP of thesis 4.7.2 per segment: C (T',), selected candidates l (T',) and each
+    segment's mean step cost E_F (eq. 4.24)."""
+    C = np.zeros(ev.n_frames, dtype=int)
+    ell = np.zeros(ev.n_frames, dtype=int)
+    costs = []
+    for i, ((ps, pe), (rs, re)) in enumerate(zip(seg.spans, seg.bounds, strict=True)):
+        c_loc, l_loc, cost = _segment_path(ev, (ps, pe), (rs, re), fps_ratio, s)
+        # boundary frames are shared by two segments: the later segment's start wins
+        C[ps : pe + 1] = rs + c_loc
+        ell[ps : pe + 1] = l_loc
+        costs.append(cost / (pe - ps + 1))
+        if on_progress:
+            on_progress("selection", 0.2 + 0.8 * (i + 1) / len(seg.bounds))
+    return C, ell, costs
+
+
+# --------------------------------------------------------------------------- 6.6, 6.7
+
+
+def _frame_flags(
+    seg: _Segmentation,
+    eps: np.ndarray,
+    large: float,
+    candidate_flags: Sequence[Sequence[str]] | None,
+) -> list[list[str]]:
+    """Flags per video frame: stage 3's, then large errors (eps (T',) above ``large``
+    radians), segment boundaries and the frames of missing or extra segments (6.6)."""
+    flags: list[list[str]] = [
+        list(candidate_flags[t]) if candidate_flags else [] for t in range(eps.shape[0])
+    ]
+    for t in np.flatnonzero(eps > large):
+        flags[t].append("large_error")
+    for i, (ps, pe) in enumerate(seg.spans):
+        if i > 0:
+            flags[ps].append("segment_boundary" if seg.found[i] else "segment_boundary_estimated")
+        if seg.status[i] != "ok":
+            for frame in range(ps, pe + 1):
+                flags[frame].append(f"{seg.status[i]}_segment")
+    return flags
+
+
+def _segment_reports(
+    seg: _Segmentation,
+    eps: np.ndarray,
+    bone_err: np.ndarray,
+    costs: list[float],
+) -> list[SegmentReport]:
+    """One report per segment, its statistics over the frames it owns (:func:`owned_frames`)
+    of the posture errors eps (T',) and bone errors (T', 16)."""
+    owned = owned_frames(seg.spans)
+    reports = []
+    for i, ((ps, pe), (rs, re)) in enumerate(zip(seg.spans, seg.bounds, strict=True)):
+        sl = slice(owned[i][0], owned[i][1] + 1)
+        reports.append(
+            SegmentReport(
+                reference_start=int(rs), reference_end=int(re),
+                performer_start=int(ps), performer_end=int(pe),
+                initial_performer_start=int(seg.initial[i]), name=seg.names[i],
+                status=seg.status[i], boundary_found=bool(seg.found[i]),
+                tempo=float(seg.tempo[i]), mean_error=float(eps[sl].mean()),
+                bone_mean_errors=bone_err[sl].mean(0), worst_frame=ps + int(np.argmax(eps[sl])),
+                cost=float(costs[i]),
+            )
+        )  # fmt: skip
+    return reports
+
+
+def _messages(eps: np.ndarray, large: float, reports: list[SegmentReport]) -> list[str]:
+    """Overall messages: a performer very different everywhere (6.7) gets one message
+    instead of per-bone noise; missing and extra segments are named (6.6)."""
+    messages = []
+    if float(eps.mean()) > large:
+        messages.append(
+            f"Your motion is very different from the reference (mean posture error "
+            f"{np.degrees(eps.mean()):.0f} deg): detailed per-bone errors are not meaningful; "
+            "check that you performed the same motion, filmed from the expected side."
+        )
+    for i, r in enumerate(reports):
+        if r.status == "missing":
+            messages.append(f"Segment {r.name or i + 1} seems to be missing.")
+        elif r.status == "extra_motion":
+            messages.append(f"Segment {r.name or i + 1} seems to contain extra motion.")
+    return messages
 
 
 # --------------------------------------------------------------------------- public
@@ -639,144 +860,27 @@ def select_and_refine(
     cands, ref, C0 = _validate(
         candidates, reference_joints, reference_segments, C_initial, fps_ratio
     )
-    unknown = [j for j in s.boundary_joints if j not in JOINT_INDEX]
-    if unknown:
-        raise InvalidInput(f"settings.boundary_joints: unknown joints {unknown}")
-    if not np.isfinite(video_fps) or video_fps <= 0:
-        raise InvalidInput(f"video_fps: expected a positive number, got {video_fps}")
-    if not s.error_smoothing_s >= 0:  # also refuses NaN
-        raise InvalidInput(
-            f"settings.error_smoothing_s must be >= 0, got {s.error_smoothing_s}"
-        )
-    if s.error_median_frames < 1 or s.error_median_frames % 2 == 0:
-        raise InvalidInput(
-            f"settings.error_median_frames must be odd and >= 1, got {s.error_median_frames}"
-        )
-    joint_ids = np.array([JOINT_INDEX[j] for j in s.boundary_joints])
-    cand_joints, valid = _pad(cands)
-    image = _image_cost(candidate_d_s, valid, s)
-    valid = valid & np.isfinite(image)
-    cand_dirs = bone_directions(cand_joints)
-    ref_dirs = bone_directions(ref)
-    n_v = len(cands)
-    bounds = reference_segments.bounds()
-    names = tuple(reference_segments.names) or ("",) * len(bounds)
-    if len(names) != len(bounds):
-        names = tuple(names[i] if i < len(names) else "" for i in range(len(bounds)))
+    _check_settings(s, video_fps)
+    ev = _evidence(cands, ref, C0, candidate_d_s, s)
+    seg = _segment_performer(ev, reference_segments, fps_ratio, s, on_progress)  # 4.7.1, 6.6
+    C, ell, costs = _refine_segments(ev, seg, fps_ratio, s, on_progress)  # 4.7.2
 
-    # 4.7.1: performer boundaries, one per interior reference boundary, kept monotone
-    initial = [0] + [_initial_boundary(C0, t) for t, _ in bounds[1:]] + [n_v - 1]
-    p_starts = [0]
-    found = [True]
-    for j, (t_ref, _) in enumerate(bounds[1:], start=1):
-        lo = max(p_starts[-1], initial[j] - s.boundary_window)
-        hi = min(n_v - 1, initial[j] + s.boundary_window)
-        lo = min(lo, hi)
-        tau, ok = _find_boundary(
-            lo, hi, t_ref, ref_dirs, cand_dirs, cand_joints, valid, s, joint_ids, image, initial[j]
-        )  # fmt: skip
-        p_starts.append(max(tau, p_starts[-1]))
-        found.append(ok)
-        if on_progress:
-            on_progress("selection", 0.2 * j / max(len(bounds) - 1, 1))
-    p_ends = p_starts[1:] + [n_v - 1]
-    spans = list(zip(p_starts, p_ends, strict=True))
-
-    # tempo and 6.6 status
-    tempo = np.array(
-        [
-            (pe - ps) * fps_ratio / max(re - rs, 1)
-            for (ps, pe), (rs, re) in zip(spans, bounds, strict=True)
-        ]
-    )
-    median = float(np.median(tempo[tempo > 0])) if (tempo > 0).any() else 1.0
-    status = []
-    for i, (ps, pe) in enumerate(spans):
-        if pe - ps < s.min_segment_frames or tempo[i] < s.missing_tempo * median:
-            status.append("missing")
-        elif tempo[i] > s.extra_tempo * median:
-            status.append("extra_motion")
-        else:
-            status.append("ok")
-
-    # 4.7.2: DP per segment
-    C = np.zeros(n_v, dtype=int)
-    ell = np.zeros(n_v, dtype=int)
-    costs = []
-    for i, ((ps, pe), (rs, re)) in enumerate(zip(spans, bounds, strict=True)):
-        n_seg_v, n_seg_r = pe - ps + 1, re - rs + 1
-        table = _segment_table(ref_dirs[rs : re + 1], cand_dirs[ps : pe + 1], valid[ps : pe + 1])
-        table = table + image[ps : pe + 1, None, :]
-        if s.anchor_deg_per_frame > 0:
-            off = np.abs(np.arange(n_seg_r)[None, :] - (C0[ps : pe + 1, None] - rs))
-            table = table + np.radians(s.anchor_deg_per_frame) * (off / fps_ratio)[..., None]
-        min_step = 1 if n_seg_r >= n_seg_v else 0
-        window = max(1, int(np.ceil(s.window_k * n_seg_r / max(n_seg_v, 1))))
-        band = max(window, int(np.ceil(s.band * n_seg_r)))
-        c_loc, l_loc, cost = refine_segment(table, window=window, band=band, min_step=min_step)
-        if not np.isfinite(cost):  # band too narrow for this segment: search the whole segment
-            c_loc, l_loc, cost = refine_segment(table, window=n_seg_r, band=n_seg_r, min_step=0)
-        # boundary frames are shared by two segments: the later segment's start wins
-        C[ps : pe + 1] = rs + c_loc
-        ell[ps : pe + 1] = l_loc
-        costs.append(cost / n_seg_v)
-        if on_progress:
-            on_progress("selection", 0.2 + 0.8 * (i + 1) / len(bounds))
-
-    frames = np.arange(n_v)
-    joints = cand_joints[frames, ell]
-    bone_err = _angles(ref_dirs[C], cand_dirs[frames, ell])
-    owned = owned_frames(spans)
+    # eps_t' = d_B(B_C(t'), B'_t') per bone, smoothed within segments (2.1.3 item 6)
+    frames = np.arange(ev.n_frames)
+    bone_err = _angles(ev.ref_dirs[C], ev.cand_dirs[frames, ell])
     bone_err = smooth_errors(
-        bone_err, owned, s.error_smoothing_s * video_fps, s.error_median_frames
+        bone_err, owned_frames(seg.spans), s.error_smoothing_s * video_fps, s.error_median_frames
     )
     eps = bone_err.mean(-1)
 
-    flags: list[list[str]] = [
-        list(candidate_flags[t]) if candidate_flags else [] for t in range(n_v)
-    ]
     large = np.radians(s.large_error_deg)
-    for t in np.flatnonzero(eps > large):
-        flags[t].append("large_error")
-    reports = []
-    for i, ((ps, pe), (rs, re)) in enumerate(zip(spans, bounds, strict=True)):
-        sl = slice(owned[i][0], owned[i][1] + 1)  # its statistics: the frames it owns
-        if i > 0:
-            flags[ps].append("segment_boundary" if found[i] else "segment_boundary_estimated")
-        if status[i] != "ok":
-            for frame in range(ps, pe + 1):
-                flags[frame].append(f"{status[i]}_segment")
-        worst = ps + int(np.argmax(eps[sl]))
-        reports.append(
-            SegmentReport(
-                reference_start=int(rs), reference_end=int(re),
-                performer_start=int(ps), performer_end=int(pe),
-                initial_performer_start=int(initial[i]), name=names[i], status=status[i],
-                boundary_found=bool(found[i]), tempo=float(tempo[i]),
-                mean_error=float(eps[sl].mean()), bone_mean_errors=bone_err[sl].mean(0),
-                worst_frame=worst, cost=float(costs[i]),
-            )
-        )  # fmt: skip
-
-    messages = []
-    if float(eps.mean()) > large:
-        messages.append(
-            f"Your motion is very different from the reference (mean posture error "
-            f"{np.degrees(eps.mean()):.0f} deg): detailed per-bone errors are not meaningful; "
-            "check that you performed the same motion, filmed from the expected side."
-        )
-    for r in reports:
-        if r.status == "missing":
-            messages.append(f"Segment {r.name or reports.index(r) + 1} seems to be missing.")
-        elif r.status == "extra_motion":
-            messages.append(
-                f"Segment {r.name or reports.index(r) + 1} seems to contain extra motion."
-            )
-
+    flags = _frame_flags(seg, eps, large, candidate_flags)
+    reports = _segment_reports(seg, eps, bone_err, costs)
     return Selection(
-        performer_segments=Segments(tuple(p_starts), n_v - 1, names),
-        C=C, selected=ell, joints=joints, posture_error=eps, bone_errors=bone_err,
-        flags=tuple(tuple(f) for f in flags), segments=tuple(reports), messages=tuple(messages),
+        performer_segments=Segments(tuple(seg.starts), ev.n_frames - 1, seg.names),
+        C=C, selected=ell, joints=ev.cand_joints[frames, ell], posture_error=eps,
+        bone_errors=bone_err, flags=tuple(tuple(f) for f in flags), segments=tuple(reports),
+        messages=tuple(_messages(eps, large, reports)),
     )  # fmt: skip
 
 
