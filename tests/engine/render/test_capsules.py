@@ -16,14 +16,11 @@ from engine.render.capsules import (
     PART_CAPSULES,
     PartScorer,
     Target,
-    WidthTarget,
     d_A_batch,
     d_S_batch,
     project_capsules,
     render,
     silhouettes,
-    width_robust_cost,
-    width_robust_terms,
 )
 
 SHAPE = BodyShape.default()
@@ -328,43 +325,3 @@ def test_bad_inputs_raise(call, match: str) -> None:  # noqa: ANN001
     tgt = Target.from_render(render(_rest(), SHAPE, CAM))
     with pytest.raises(InvalidInput, match=match):
         call(tgt)
-
-
-# ----------------------------------------------------------------------------- width-robust
-
-
-def _turned(joints: np.ndarray, part: str, deg: float, axis: np.ndarray) -> np.ndarray:
-    from engine.body.skeleton import PART_ROOT_JOINT
-    from engine.stages.candidates import _SUBTREE_JOINTS
-
-    p = PART_INDEX[part]
-    J = joints[PART_ROOT_JOINT[p]]
-    out = joints.copy()
-    sub = _SUBTREE_JOINTS[p]
-    out[sub] = J + (joints[sub] - J) @ rotation_about_axis(axis, np.radians(deg)).T
-    return out
-
-
-def test_width_robust_ranks_truth_first_on_a_body_wider_than_the_model():
-    # truth: left elbow flexed 50 deg and right arm raised 30 deg, in the image plane
-    n = CAM.view_dir
-    truth = _turned(_turned(_rest(), "l_lower_arm", 50.0, n), "r_upper_arm", -30.0, n)
-    wide = BodyShape(offsets=SHAPE.offsets, radii=np.asarray(SHAPE.radii) * 1.4)
-    target = WidthTarget.from_mask(render(truth, wide, CAM).silhouette)
-    others = [
-        _turned(truth, part, deg, n)
-        for part in ("l_lower_arm", "l_upper_arm", "r_upper_arm", "r_lower_arm", "l_upper_leg")
-        for deg in (-20.0, -10.0, 10.0, 20.0)
-    ]
-    cost = width_robust_cost(np.stack([truth, *others]), target, SHAPE, CAM)
-    assert int(np.argmin(cost)) == 0
-    assert cost[0] < 0.02
-    assert np.all(cost[1:] > cost[0] + 0.01)
-
-
-def test_width_robust_rejects_a_target_of_another_size():
-    target = WidthTarget.from_mask(np.ones((10, 10), bool))
-    with pytest.raises(InvalidInput, match="camera image"):
-        width_robust_terms(_rest()[None], target, SHAPE, CAM)
-    with pytest.raises(InvalidInput, match="2D"):
-        WidthTarget.from_mask(np.ones(10, bool))

@@ -1,21 +1,32 @@
-"""Private core of stage 3: nonparametric belief propagation over body parts (thesis 4.6.1-4.6.4).
+"""Nonparametric belief propagation over the body parts (thesis 4.6.1-4.6.4).
 
 A pose sample of part i is its root-joint position x (3,) and its rotation R (3, 3) relative
 to the default posture; the part's other joints are x + R @ offsets[b] for its bones b (every
 bone of a part starts at the part's root joint). Parts are connected along the part tree
 (PART_PARENT); each edge carries the joint constraint psi (eq. 4.18) with the angle limit of
 appendix A at the child part's root joint. All weights are kept as logarithms.
+
+:func:`_bp_estimate` runs the whole estimator: similarity phi = exp(-beta d_S) with the part
+at the sample and the other parts at their previous-iteration poses (4.6.2), joint
+constraint psi = J exp(-|x_i - x_j|^2 / sigma^2) (4.6.3) and the hardening schedule
+sigma_k = lambda sigma_{k-1}, a_k = a_{k-1}^(1/lambda) (4.6.4 step 1).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Protocol
 
 import numpy as np
 from scipy.special import logsumexp
 
-from engine.body.kinematics import kabsch, rotation_about_axis, rotation_between
+from engine.body.kinematics import (
+    bone_vectors,
+    kabsch,
+    part_rotations,
+    rotation_about_axis,
+    rotation_between,
+)
 from engine.body.skeleton import (
     BONE_CHILD,
     JOINT_INDEX,
@@ -25,20 +36,15 @@ from engine.body.skeleton import (
     PART_PARENT,
     PART_ROOT_JOINT,
 )
+from engine.stages.candidates.scorer import _Scorer
+from engine.stages.candidates.settings import CandidateSettings
 
 #: Undirected edges of the part tree as (parent part, child part), shape (11, 2).
 EDGES = np.array([(int(PART_PARENT[i]), i) for i in range(N_PARTS) if PART_PARENT[i] >= 0])
-#: Neighbours of each part.
-NEIGHBOURS: tuple[tuple[int, ...], ...] = tuple(
-    tuple(int(e[0]) if e[1] == p else int(e[1]) for e in EDGES if p in e) for p in range(N_PARTS)
-)
 _LIMIT_BY_JOINT = {JOINT_INDEX[j]: (JOINT_INDEX[b], np.radians(m)) for j, _, b, m in JOINT_LIMITS}
 
-
-class Scorer(Protocol):
-    def set_pose(self, joints: np.ndarray) -> None: ...
-
-    def score(self, parts: tuple[int, ...] | int, joints_samples: np.ndarray) -> np.ndarray: ...
+#: A prior term -log p of part p's rotation samples R (S, 3, 3): prior(p, R) -> (S,).
+Prior = Callable[[int, np.ndarray], np.ndarray]
 
 
 @dataclass
@@ -209,3 +215,100 @@ def resample(
     R = random_rotations(rng, n - 1, rot_std) @ R
     b = o.best
     return np.concatenate([o.x[b : b + 1], x]), np.concatenate([o.R[b : b + 1], R])
+
+
+def _bp_prior(ref: np.ndarray, offsets: np.ndarray, s: CandidateSettings) -> Prior:
+    """BP's prior towards ``ref`` (17, 3) (``s.bp_prior_weight``, beyond the thesis).
+
+    Part p's samples pay mu x its bones' share of d_B(sample, reference) (16 bones), so BP
+    maximises d_S + mu d_B(., B_C(t')); zeros when mu is 0 (the thesis).
+    """
+    ref_dirs = bone_vectors(ref)
+    ref_dirs = ref_dirs / np.linalg.norm(ref_dirs, axis=-1, keepdims=True)
+    off_dirs = offsets / np.maximum(np.linalg.norm(offsets, axis=-1, keepdims=True), 1e-12)
+
+    def prior(p: int, R: np.ndarray) -> np.ndarray:
+        """mu x part p's share of d_B(sample, reference) (16 bones), shape (S,)."""
+        if s.bp_prior_weight <= 0:
+            return np.zeros(len(R))
+        ang = sum(
+            np.arccos(np.clip(np.einsum("sij,j,i->s", R, off_dirs[b], ref_dirs[b]), -1, 1))
+            for b in PART_BONES[p]
+        )
+        return s.bp_prior_weight * ang / 16.0
+
+    return prior
+
+
+def _bp_estimate(
+    scorer: _Scorer,
+    pool: np.ndarray,
+    d0: np.ndarray,
+    offsets: np.ndarray,
+    s: CandidateSettings,
+    rng: np.random.Generator,
+    prior: Prior,
+) -> tuple[np.ndarray, list[float]]:
+    """Nonparametric BP (thesis 4.6.4) from the initial postures ``pool`` (M, 17, 3).
+
+    ``d0`` (M,) is their d_S. Returns the connected best posture (17, 3) and its d_S after each
+    iteration (0 = initial).
+    """
+    parts = _initial_samples(scorer, pool, d0, offsets, s, rng, prior)
+    rot_std = np.radians(s.rot_std0_deg)
+    pos_std = s.pos_std0_m
+
+    def connected() -> np.ndarray:
+        return assemble(offsets, parts, [q.best for q in parts])
+
+    history = [float(scorer.full(connected()[None])[0])]
+    sigma, log_a = s.sigma0_m, np.log(s.a0)
+    for _ in range(s.n_iterations):
+        sigma *= s.decrease  # step 1: harden the constraints
+        log_a /= s.decrease
+        rot_std = max(rot_std * s.decrease, np.radians(s.rot_std_min_deg))
+        pos_std = max(pos_std * s.decrease, s.pos_std_min_m)
+        context = connected()
+        scorer.set_pose(context)
+        new = []
+        for p in range(N_PARTS):  # step 2: sample; phi with the others at the last poses
+            x, R = resample(offsets, parts, p, s.n_samples, rot_std, pos_std, s.attach_prob, rng)
+            lphi = -s.beta * (scorer.part(p, fill_part(context, p, offsets, x, R)) + prior(p, R))
+            new.append(PartSamples(x, R, lphi, lphi.copy()))
+        step_messages(offsets, parts, new, sigma, log_a)  # steps 3-4
+        parts = new
+        history.append(float(scorer.full(connected()[None])[0]))
+
+    return connected(), history
+
+
+def _initial_samples(
+    scorer: _Scorer,
+    pool: np.ndarray,
+    d0: np.ndarray,
+    offsets: np.ndarray,
+    s: CandidateSettings,
+    rng: np.random.Generator,
+    prior: Prior,
+) -> list[PartSamples]:
+    """BP's first samples of every part: drawn from the initial postures ``pool`` (M, 17, 3)
+    weighted by their likelihood (``d0``, (M,)), each posture itself once, the others moved
+    by the first sampling Gaussian (4.6.4 step 2)."""
+    R0 = part_rotations(pool, offsets)  # (M, 12, 3, 3)
+    w = np.exp(-s.beta * (d0 - d0.min()))
+    m_of = np.concatenate([np.arange(len(pool)), rng.choice(len(pool), s.n_samples, p=w / w.sum())])
+    m_of = m_of[: s.n_samples]
+    rot_std = np.radians(s.rot_std0_deg)
+    pos_std = s.pos_std0_m
+    context = pool[int(np.argmin(d0))]
+    scorer.set_pose(context)
+    parts: list[PartSamples] = []
+    for p in range(N_PARTS):
+        x = pool[m_of, PART_ROOT_JOINT[p]].copy()
+        R = R0[m_of, p]
+        k = len(pool)
+        R = np.concatenate([R[:k], random_rotations(rng, len(m_of) - k, rot_std) @ R[k:]])
+        x[k:] += rng.normal(0.0, pos_std, size=x[k:].shape)
+        lphi = -s.beta * (scorer.part(p, fill_part(context, p, offsets, x, R)) + prior(p, R))
+        parts.append(PartSamples(x, R, lphi, lphi - np.logaddexp.reduce(lphi)))
+    return parts
