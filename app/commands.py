@@ -121,6 +121,7 @@ def seed_demo_analysis(session, settings, storage, queue, *, out=print) -> None:
     from engine.io.bvh import load_reference
     from engine.io.encode import write_video
     from engine.synth import SynthSettings, synthesize
+    from worker.contract import AnalysisFolder
 
     analysis_id = str(uuid.uuid4())
     work_dir = storage.analysis_dir(analysis_id)
@@ -131,7 +132,7 @@ def seed_demo_analysis(session, settings, storage, queue, *, out=print) -> None:
         settings=SynthSettings(fps=15.0, n_wrong=1, error_deg=25.0, noise_sigma=2.0),
         rng=np.random.default_rng(7),
     )
-    video_path = work_dir / "video.mp4"
+    video_path = AnalysisFolder(work_dir).video(".mp4")
     write_video(video_path, case.frames, case.fps)
     analysis = Analysis(
         id=analysis_id, club_id=club.id, performer_id=performer.id, reference_id=ref.id,

@@ -108,7 +108,6 @@ class Reference(Base):
     club_id: Mapped[int] = mapped_column(ForeignKey("clubs.id", ondelete="CASCADE"), index=True)
     name: Mapped[str] = mapped_column(String(200))
     bvh_path: Mapped[str] = mapped_column(String(1000))
-    domain_path: Mapped[str | None] = mapped_column(String(1000), default=None)
     domain_config: Mapped[dict | None] = mapped_column(JSON, default=None)
     #: What the importer learned: frames, fps, duration_s, segments, joints.
     derived: Mapped[dict] = mapped_column(JSON, default=dict)

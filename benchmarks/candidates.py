@@ -187,7 +187,7 @@ def end_to_end(args: argparse.Namespace, settings: CandidateSettings) -> None:
     estimation error, rank correlation of eps_t') and C's error before and after stage 4.
     """
     from engine.io.bvh import load_reference as _load
-    from engine.pipeline import _reference_segments
+    from engine.reference.domain import find_domain, reference_segments
     from engine.stages.candidates import estimate_candidates_chunk
     from engine.stages.selection import SelectionSettings, select_and_refine
 
@@ -226,7 +226,7 @@ def end_to_end(args: argparse.Namespace, settings: CandidateSettings) -> None:
     sel_settings = SelectionSettings()
     for kv in args.sel:
         sel_settings = replace(sel_settings, **_setting(sel_settings, kv))
-    segs = _reference_segments(ref, case / "reference.bvh")
+    segs = reference_segments(ref.motion, find_domain(case / "reference.bvh"))
     sel = select_and_refine(
         cands, ref.motion.joints, segs, C0.astype(float), settings=sel_settings,
         fps_ratio=truth["reference_fps"] / truth["fps"], video_fps=truth["fps"],

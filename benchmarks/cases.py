@@ -76,8 +76,9 @@ def score_case(case: Path, settings: dict, save: Path | None = None) -> dict:
     from half_rate import load_scorer
 
     from engine.pipeline import analyze
+    from engine.settings import Settings
 
-    result = analyze(case / "reference.bvh", case / "video.mp4", settings)
+    result = analyze(case / "reference.bvh", case / "video.mp4", Settings.from_dict(settings))
     if save is not None:
         (save / f"{case.name}.json").write_text(json.dumps(result))
     truth = json.loads((case / "truth.json").read_text())

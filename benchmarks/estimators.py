@@ -20,6 +20,7 @@ from pathlib import Path
 from half_rate import SCORE_KEYS, load_scorer  # benchmarks/ is on sys.path when run as a script
 
 from engine.pipeline import Prepared, candidates, prepare, select
+from engine.settings import Settings
 
 
 def prepared_for(case: Path, cache: Path) -> Prepared:
@@ -48,7 +49,7 @@ def main(argv: list[str] | None = None) -> int:
         truth = json.loads((case / "truth.json").read_text())
         p = prepared_for(case, args.cache)
         for est in args.estimators:
-            settings = {"candidates": {**extra, "estimator": est}}
+            settings = Settings.from_dict({"candidates": {**extra, "estimator": est}})
             t0 = time.perf_counter()
             chunks = [candidates(p, r, settings) for r in p.chunks(16)]
             s3 = (time.perf_counter() - t0) / p.n_frames

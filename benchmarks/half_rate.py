@@ -60,9 +60,10 @@ def half_rate_case(case: Path, out: Path) -> Path:
 
 def analyse(case: Path, settings: dict) -> dict:
     from engine.pipeline import analyze
+    from engine.settings import Settings
 
     t0 = time.perf_counter()
-    result = analyze(case / "reference.bvh", case / "video.mp4", settings)
+    result = analyze(case / "reference.bvh", case / "video.mp4", Settings.from_dict(settings))
     result["timing_s"]["wall"] = time.perf_counter() - t0
     return result
 

@@ -73,6 +73,7 @@ def main() -> None:
     args = ap.parse_args()
     from engine.errors import EngineError
     from engine.pipeline import analyze
+    from engine.settings import Settings
 
     args.out.mkdir(parents=True, exist_ok=True)
     for clip, ref in CLIPS:
@@ -81,7 +82,9 @@ def main() -> None:
         video = SHARED / "data" / "real" / clip
         t0 = time.perf_counter()
         try:
-            result = analyze(SHARED / "data" / "cmu" / ref, video, json.loads(args.set))
+            result = analyze(
+                SHARED / "data" / "cmu" / ref, video, Settings.from_dict(json.loads(args.set))
+            )
         except EngineError as exc:
             print(f"{clip}: refused: {exc}")
             continue

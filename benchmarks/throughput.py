@@ -71,8 +71,11 @@ def cut_video(out: Path, frames: int = 16, step: int = 4) -> Path:
     return out
 
 
-def run(n: int, n_workers: int, env: dict, root: Path, video: Path, settings: dict) -> float:
-    """Seconds from the first enqueue until all ``n`` analyses are finished."""
+def run(
+    n: int, n_workers: int, env: dict, root: Path, video: Path, settings: dict, app: str
+) -> float:
+    """Seconds from the first enqueue until all ``n`` analyses are finished, with workers of
+    the Celery ``app`` module."""
     import redis
 
     from worker import celery_app, jobs
@@ -86,7 +89,7 @@ def run(n: int, n_workers: int, env: dict, root: Path, video: Path, settings: di
         for i in range(n_workers):
             log = open(root / f"worker-{n_workers}-{i}.log", "ab")  # noqa: SIM115
             procs.append(subprocess.Popen(
-                [sys.executable, "-m", "celery", "-A", "worker.celery_app", "worker",
+                [sys.executable, "-m", "celery", "-A", app, "worker",
                  "--concurrency", "1", "--loglevel", "INFO", "--hostname", f"b{i}@%h",
                  "--without-gossip", "--without-mingle"],
                 env=env, cwd=REPO, stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
@@ -283,9 +286,9 @@ def main(argv: list[str] | None = None) -> int:
             if args.latency_only:
                 poll_latency(root, env, tiny_video(root / "tiny.mp4"), args.clients, args.polls)
                 return 0
-            settings = CHEAP
-            if args.fake is not None:
-                env["COACH_PIPELINE_MODULE"] = "tests.worker.fake_pipeline"
+            settings, app = CHEAP, "worker.celery_app"
+            if args.fake is not None:  # the same tasks over the fake engine
+                app = "tests.worker.fake_app"
                 settings = {"fake_frames": 16, "fake_seconds_per_frame": args.fake}
             video = cut_video(root / "short.mp4")
             print(
@@ -294,7 +297,7 @@ def main(argv: list[str] | None = None) -> int:
                 f"{os.cpu_count()} CPUs"
             )
             for n_workers in args.workers:
-                seconds = run(args.n, n_workers, env, root, video, settings)
+                seconds = run(args.n, n_workers, env, root, video, settings, app)
                 print(
                     f"workers={n_workers}  {seconds:7.1f} s  "
                     f"{60.0 * args.n / seconds:6.2f} analyses/min",

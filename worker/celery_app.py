@@ -31,7 +31,7 @@ from celery import Celery
 from kombu import pools
 
 from worker import metrics
-from worker.contract import ANALYZE_TASK, AnalysisJob
+from worker.contract import ANALYZE_TASK, AnalysisFolder, AnalysisJob
 from worker.settings import WorkerSettings
 
 log = logging.getLogger("coach.worker")
@@ -164,7 +164,7 @@ def revoke(task_id: str) -> None:
     if work_dir is not None:
         jobs.request_cancel(work_dir)
         try:
-            ids += json.loads(jobs.Paths(work_dir).tasks.read_text()).get("stage_task_ids", [])
+            ids += json.loads(AnalysisFolder(work_dir).tasks.read_text()).get("stage_task_ids", [])
         except (OSError, ValueError):
             pass  # the canvas was not launched yet: the entry task will see the marker
     try:

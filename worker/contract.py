@@ -5,18 +5,16 @@ analysis' own folder. The app imports this module (and nothing else of the worke
 work; the worker never imports the app: it learns everything from the payload and reports
 through files in the analysis folder and Celery task states.
 
-Analysis folder layout (``work_dir``), written by the worker, read by the app:
-
-    status.json      {"state": queued|running|done|failed|cancelled, "stage": str,
-                      "progress": 0..1, "message": str, "error": str|null, "updated": iso time}
-                     replaced atomically (temporary name + rename) on every change
-    result.json      the DESIGN.md result, present once the analysis is done
-    stages/          one output per finished engine stage; a stage whose output exists is skipped
+The analysis folder (``work_dir``) is written by the worker and read by the app and the web
+viewer; :class:`AnalysisFolder` is the only place that spells its file names.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+import os
+import re
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
 
 #: Celery task names (stable strings: they are the wire contract between api and workers).
 ANALYZE_TASK = "coach.analyze"
@@ -32,17 +30,34 @@ STATES = ("queued", "running", "done", "failed", "cancelled")
 
 @dataclass(frozen=True)
 class AnalysisJob:
-    """Payload of :data:`ANALYZE_TASK`: everything a worker needs, by path."""
+    """Payload of :data:`ANALYZE_TASK`: everything the engine needs, as paths and data.
+
+    Attributes
+    ----------
+    analysis_id : str
+    reference_path, video_path : str
+        The reference BVH and the performer's video.
+    work_dir : str
+        The analysis folder (:class:`AnalysisFolder`).
+    settings : dict
+        Engine settings as JSON (``engine.settings.Settings.from_dict``), parsed once per
+        task by the worker.
+    domain : dict or None
+        The coach's domain document of the reference (``engine.reference.domain``: segments,
+        names, bone weights, tolerances), as stored with the reference.
+    reference_mapping : dict or None
+        How the BVH's joints map onto ours (our joint -> BVH joint), as the club gave it at
+        upload (None: the engine's name tables).
+    reference_units_to_m : float or None
+        Metres per BVH unit (None: the engine's guess).
+    """
 
     analysis_id: str
     reference_path: str
     video_path: str
     work_dir: str
     settings: dict = field(default_factory=dict)
-    domain_path: str | None = None
-    #: How the reference BVH's joints map onto ours (our joint -> BVH joint) and its metres
-    #: per file unit, as the club gave them at upload (None: the engine's name tables and
-    #: its guess). Carried as data: the engine's domain file does not hold them.
+    domain: dict | None = None
     reference_mapping: dict[str, str] | None = None
     reference_units_to_m: float | None = None
 
@@ -51,4 +66,64 @@ class AnalysisJob:
 
     @classmethod
     def from_json(cls, d: dict) -> AnalysisJob:
-        return cls(**d)
+        """The job from its JSON; keys of older payloads still queued (``domain_path``)
+        are ignored."""
+        known = {f.name for f in fields(cls)}
+        return cls(**{k: v for k, v in d.items() if k in known})
+
+
+class AnalysisFolder:
+    """Where one analysis keeps its files: the worker writes them, the app and viewer read.
+
+    ::
+
+        status.json      {"state": queued|running|done|failed|cancelled, "stage": str,
+                          "progress": 0..1, "message": str, "error": str|null,
+                          "updated": iso time}, replaced atomically on every change
+        video.<ext>      the performer's upload, as the app stored it
+        result.json      the DESIGN.md result, present once the analysis is done
+        cancel           marker: the analysis was cancelled
+        tasks.json       the Celery task ids of the analysis' canvas
+        stages/          one output per finished engine stage (a stage whose output exists
+                         is skipped):
+            prepare.npz                  stages 0-2
+            candidates-<i>-of-<n>.npz    stage 3, chunk i of n
+
+    Writers write to a temporary name holding ``.tmp`` and rename (:func:`is_temporary`).
+    """
+
+    _CHUNK = re.compile(r"candidates-(\d+)-of-(\d+)\.npz")
+
+    def __init__(self, work_dir: str | os.PathLike):
+        self.work_dir = Path(work_dir)
+        self.status = self.work_dir / "status.json"
+        self.result = self.work_dir / "result.json"
+        self.cancel = self.work_dir / "cancel"
+        self.tasks = self.work_dir / "tasks.json"
+        self.stages = self.work_dir / "stages"
+        self.prepared = self.stages / "prepare.npz"
+
+    def video(self, suffix: str) -> Path:
+        """Where the app stores the performer's video (``suffix`` like ``".mp4"``)."""
+        return self.work_dir / f"video{suffix}"
+
+    def chunk(self, index: int, n_chunks: int) -> Path:
+        """Stage 3's output for chunk ``index`` of ``n_chunks``."""
+        return self.stages / f"candidates-{index}-of-{n_chunks}.npz"
+
+    def chunks(self, n_chunks: int) -> list[Path]:
+        return [self.chunk(i, n_chunks) for i in range(n_chunks)]
+
+    def finished_chunks(self) -> list[Path]:
+        """Every stage-3 output present now, in name order, temporary files left out."""
+        if not self.stages.is_dir():
+            return []
+        return sorted(
+            p for p in self.stages.iterdir()
+            if self._CHUNK.fullmatch(p.name) and not is_temporary(p)
+        )  # fmt: skip
+
+
+def is_temporary(path: Path) -> bool:
+    """A file still being written (its writer renames it when complete)."""
+    return ".tmp" in path.name

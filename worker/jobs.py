@@ -22,13 +22,13 @@ callback (the Celery task's ``update_state``). A ``cancel`` marker file in the a
 is checked between stages and on every progress callback from the engine, so a cancelled
 analysis stops within one progress step.
 
-The engine's pipeline module is a keyword argument (default: the module named by
-``COACH_PIPELINE_MODULE``, normally :mod:`engine.pipeline`), so tests can pass a fake.
+The engine is :mod:`engine.pipeline`, imported here; every function takes it as the keyword
+``pipeline`` too, so tests can pass a fake with the same three steps. The job's settings and
+domain are parsed here, once per task, into the engine's typed objects.
 """
 
 from __future__ import annotations
 
-import importlib
 import json
 import logging
 import os
@@ -40,14 +40,16 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
+from engine import pipeline as engine_pipeline
 from engine.errors import EngineError
+from engine.reference.domain import Domain
+from engine.settings import Settings
 from worker import metrics
-from worker.contract import AnalysisJob
+from worker.contract import AnalysisFolder, AnalysisJob
 
 log = logging.getLogger("coach.worker")
 
 TERMINAL = ("done", "failed", "cancelled")
-CANCEL_MARKER = "cancel"
 
 #: Share of the overall progress bar each stage covers (prepare, candidates, select).
 _SPAN = {"prepare": (0.0, 0.35), "candidates": (0.35, 0.90), "select": (0.90, 1.0)}
@@ -99,28 +101,9 @@ def write_json_atomic(path: str | os.PathLike, data: Any) -> Path:
     return write_atomic(path, write)
 
 
-class Paths:
-    """Where one analysis keeps its files (layout in :mod:`worker.contract`)."""
-
-    def __init__(self, work_dir: str | os.PathLike):
-        self.work_dir = Path(work_dir)
-        self.status = self.work_dir / "status.json"
-        self.result = self.work_dir / "result.json"
-        self.stages = self.work_dir / "stages"
-        self.cancel = self.work_dir / CANCEL_MARKER
-        self.prepared = self.stages / "prepare.npz"
-        self.tasks = self.work_dir / "tasks.json"
-
-    def chunk(self, index: int, n_chunks: int) -> Path:
-        return self.stages / f"candidates-{index}-of-{n_chunks}.npz"
-
-    def chunks(self, n_chunks: int) -> list[Path]:
-        return [self.chunk(i, n_chunks) for i in range(n_chunks)]
-
-
 def read_status(work_dir: str | os.PathLike) -> dict | None:
     try:
-        return json.loads(Paths(work_dir).status.read_text())
+        return json.loads(AnalysisFolder(work_dir).status.read_text())
     except (OSError, ValueError):
         return None
 
@@ -147,7 +130,7 @@ def write_status(
         if current is not None and current.get("state") in TERMINAL:
             return False
     write_json_atomic(
-        Paths(work_dir).status,
+        AnalysisFolder(work_dir).status,
         {
             "state": state,
             "stage": stage,
@@ -162,7 +145,7 @@ def write_status(
 
 def request_cancel(work_dir: str | os.PathLike) -> None:
     """Mark the analysis cancelled: the marker stops running stages, status says cancelled."""
-    paths = Paths(work_dir)
+    paths = AnalysisFolder(work_dir)
     paths.work_dir.mkdir(parents=True, exist_ok=True)
     paths.cancel.touch()
     current = read_status(work_dir) or {}
@@ -178,7 +161,7 @@ def request_cancel(work_dir: str | os.PathLike) -> None:
 
 
 def is_cancelled(work_dir: str | os.PathLike) -> bool:
-    return Paths(work_dir).cancel.exists()
+    return AnalysisFolder(work_dir).cancel.exists()
 
 
 def check_cancel(job: AnalysisJob) -> None:
@@ -242,11 +225,20 @@ class Progress:
             self.publish(meta)
 
 
-def load_pipeline(name: str | None = None) -> ModuleType:
-    """The engine pipeline module (``COACH_PIPELINE_MODULE`` or :mod:`engine.pipeline`)."""
-    return importlib.import_module(
-        name or os.environ.get("COACH_PIPELINE_MODULE") or "engine.pipeline"
-    )
+def engine_inputs(
+    job: AnalysisJob, pipeline: ModuleType = engine_pipeline
+) -> tuple[Settings, Domain | None]:
+    """The job's settings and domain as the engine takes them (parsed once per task, here,
+    by the engine's own parsers: ``pipeline.Settings.from_dict``, ``pipeline.parse_domain``).
+
+    Raises
+    ------
+    InvalidInput
+        Unknown or ill-typed settings, or an invalid domain document.
+    """
+    settings = pipeline.Settings.from_dict(job.settings or None)
+    domain = None if job.domain is None else pipeline.parse_domain(job.domain)
+    return settings, domain
 
 
 def _stage_done(job: AnalysisJob, stage: str, started: float, **extra: Any) -> None:
@@ -272,7 +264,7 @@ def _skipped(job: AnalysisJob, stage: str, output: Path) -> Path:
 
 def start(job: AnalysisJob) -> bool:
     """Mark the analysis running; False if it is already finished or cancelled (skip it)."""
-    paths = Paths(job.work_dir)
+    paths = AnalysisFolder(job.work_dir)
     paths.stages.mkdir(parents=True, exist_ok=True)
     if is_cancelled(job.work_dir):
         request_cancel(job.work_dir)
@@ -288,19 +280,19 @@ def start(job: AnalysisJob) -> bool:
 
 
 def run_prepare(
-    job: AnalysisJob, *, pipeline: ModuleType | None = None, publish: Publish | None = None
+    job: AnalysisJob, *, pipeline: ModuleType = engine_pipeline, publish: Publish | None = None
 ) -> Path:
     """Stages 0-2 (foreground, calibration, approximate alignment) -> ``stages/prepare.npz``."""
-    paths = Paths(job.work_dir)
+    paths = AnalysisFolder(job.work_dir)
     if paths.prepared.exists():
         return _skipped(job, "prepare", paths.prepared)
     check_cancel(job)
-    pipeline = pipeline or load_pipeline()
     progress = Progress(job, "prepare", *_SPAN["prepare"], publish)
     progress.report("prepare", _SPAN["prepare"][0], "preparing")
     started = time.monotonic()
+    settings, domain = engine_inputs(job, pipeline)
     prepared = pipeline.prepare(
-        job.reference_path, job.video_path, job.settings or None,
+        job.reference_path, job.video_path, settings, domain=domain,
         mapping=job.reference_mapping, units_to_m=job.reference_units_to_m,
         on_progress=progress,
     )  # fmt: skip
@@ -315,18 +307,17 @@ def run_candidates(
     index: int,
     n_chunks: int,
     *,
-    pipeline: ModuleType | None = None,
+    pipeline: ModuleType = engine_pipeline,
     publish: Publish | None = None,
 ) -> Path:
     """Stage 3 on chunk ``index`` of ``n_chunks`` -> ``stages/candidates-<i>-of-<n>.npz``."""
     if not 0 <= index < n_chunks:
         raise ValueError(f"chunk index must be in [0, {n_chunks}), got {index}")
-    paths = Paths(job.work_dir)
+    paths = AnalysisFolder(job.work_dir)
     out = paths.chunk(index, n_chunks)
     if out.exists():
         return _skipped(job, "candidates", out)
     check_cancel(job)
-    pipeline = pipeline or load_pipeline()
     prepared = pipeline.Prepared.load(paths.prepared)
     ranges = prepared.chunks(n_chunks)
     if index >= len(ranges):
@@ -346,7 +337,8 @@ def run_candidates(
     )
     progress.report("candidates", lo + done * step, f"{label}: started")
     started = time.monotonic()
-    chunk = pipeline.candidates(prepared, frames, job.settings or None, on_progress=progress)
+    settings, _ = engine_inputs(job, pipeline)
+    chunk = pipeline.candidates(prepared, frames, settings, on_progress=progress)
     check_cancel(job)
     write_atomic(out, chunk.save)
     _stage_done(
@@ -363,7 +355,7 @@ def run_select(
     job: AnalysisJob,
     n_chunks: int,
     *,
-    pipeline: ModuleType | None = None,
+    pipeline: ModuleType = engine_pipeline,
     publish: Publish | None = None,
     on_result: Callable[[Path], None] | None = None,
 ) -> Path:
@@ -372,12 +364,11 @@ def run_select(
     ``on_result(path)`` runs after result.json exists and before status.json says done (the
     task stores its success there, so whoever sees "done" also sees the task's result).
     """
-    paths = Paths(job.work_dir)
+    paths = AnalysisFolder(job.work_dir)
     if paths.result.exists():
         _skipped(job, "select", paths.result)
     else:
         check_cancel(job)
-        pipeline = pipeline or load_pipeline()
         prepared = pipeline.Prepared.load(paths.prepared)
         expected = paths.chunks(n_chunks)[: len(prepared.chunks(n_chunks))]
         missing = [p.name for p in expected if not p.exists()]
@@ -387,7 +378,8 @@ def run_select(
         progress = Progress(job, "select", *_SPAN["select"], publish)
         progress.report("select", _SPAN["select"][0], "selecting")
         started = time.monotonic()
-        result = pipeline.select(prepared, chunks, job.settings or None, on_progress=progress)
+        settings, _ = engine_inputs(job, pipeline)
+        result = pipeline.select(prepared, chunks, settings, on_progress=progress)
         check_cancel(job)
         result.setdefault("analysis_id", job.analysis_id)
         write_json_atomic(paths.result, result)
@@ -404,7 +396,7 @@ def run_all(
     job: AnalysisJob,
     n_chunks: int,
     *,
-    pipeline: ModuleType | None = None,
+    pipeline: ModuleType = engine_pipeline,
     publish: Publish | None = None,
 ) -> Path:
     """Every stage in order in this process (embedded sequential mode); returns result.json.
@@ -413,7 +405,7 @@ def run_all(
     """
     try:
         if not start(job):
-            return Paths(job.work_dir).result
+            return AnalysisFolder(job.work_dir).result
         run_prepare(job, pipeline=pipeline, publish=publish)
         for i in range(n_chunks):
             run_candidates(job, i, n_chunks, pipeline=pipeline, publish=publish)

@@ -10,8 +10,6 @@ COACH_BROKER_URL           ``embedded`` (default): kombu's filesystem transport 
 COACH_RESULT_BACKEND       default: ``file://$COACH_DATA_DIR/celery/results`` when embedded,
                            the broker URL when it is Redis
 COACH_CHUNKS               stage-3 chunks per analysis when the settings do not say (4)
-COACH_PIPELINE_MODULE      module providing prepare/candidates/select (``engine.pipeline``);
-                           tests point it at a fake to control timing
 COACH_VISIBILITY_TIMEOUT_S Redis visibility timeout, seconds (7200)
 COACH_RESTORE_INTERVAL_S   how often a Redis worker looks for messages a dead worker left
                            unacknowledged past the visibility timeout, seconds (60)
@@ -80,7 +78,6 @@ class WorkerSettings:
     broker_url: str
     result_backend: str
     chunks: int = 4
-    pipeline_module: str = "engine.pipeline"
     visibility_timeout_s: int = 7200
     restore_interval_s: int = 60
     max_retries: int = 5
@@ -151,7 +148,6 @@ class WorkerSettings:
             broker_url=broker,
             result_backend=backend,
             chunks=chunks,
-            pipeline_module=env.get("COACH_PIPELINE_MODULE") or "engine.pipeline",
             visibility_timeout_s=_env_int(env, "COACH_VISIBILITY_TIMEOUT_S", 7200),
             restore_interval_s=_env_int(env, "COACH_RESTORE_INTERVAL_S", 60),
             max_retries=_env_int(env, "COACH_MAX_RETRIES", 5),

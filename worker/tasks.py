@@ -23,11 +23,13 @@ from __future__ import annotations
 import json
 import logging
 import random
+from types import ModuleType
 
 from celery import chain, chord, group
 from celery.exceptions import SoftTimeLimitExceeded
 from kombu.exceptions import OperationalError
 
+from engine import pipeline as engine_pipeline
 from engine.errors import EngineError
 from worker import jobs, metrics
 from worker.celery_app import app, current_settings
@@ -37,6 +39,7 @@ from worker.contract import (
     PREPARE_TASK,
     PROGRESS_STATE,
     SELECT_TASK,
+    AnalysisFolder,
     AnalysisJob,
 )
 
@@ -59,6 +62,10 @@ TRANSIENT: tuple[type[BaseException], ...] = (
 )
 
 _S = current_settings()
+
+#: The engine these tasks run. Tests of the queue's behaviour start a worker whose app module
+#: (``tests/worker/fake_app.py``) sets a fake here, whose stages last a known time.
+ENGINE: ModuleType = engine_pipeline
 
 
 def _backoff(retries: int) -> float:
@@ -140,7 +147,7 @@ def analyze(self, job_json: dict) -> dict:
         if not jobs.start(job):
             return {"analysis_id": job.analysis_id, "launched": False}
         if _S.sequential:
-            path = jobs.run_all(job, n_chunks, publish=_publisher(self))
+            path = jobs.run_all(job, n_chunks, pipeline=ENGINE, publish=_publisher(self))
             self.update_state(state="SUCCESS", meta={"result_path": str(path)})
             return {"analysis_id": job.analysis_id, "result_path": str(path)}
         return launch(job, n_chunks, root_id=self.request.id)
@@ -164,7 +171,7 @@ def launch(job: AnalysisJob, n_chunks: int, *, root_id: str | None) -> dict:
         *(f"{base}-candidates-{i}" for i in range(n_chunks)),
         f"{base}-select",
     ]
-    tasks_note = jobs.Paths(job.work_dir).tasks
+    tasks_note = AnalysisFolder(job.work_dir).tasks
     try:
         if json.loads(tasks_note.read_text()).get("root_id") == root_id:
             # This entry message was delivered again after it launched the canvas (worker died
@@ -174,7 +181,7 @@ def launch(job: AnalysisJob, n_chunks: int, *, root_id: str | None) -> dict:
         pass
     canvas.apply_async()
     jobs.write_json_atomic(
-        jobs.Paths(job.work_dir).tasks, {"root_id": root_id, "stage_task_ids": ids}
+        AnalysisFolder(job.work_dir).tasks, {"root_id": root_id, "stage_task_ids": ids}
     )
     jobs.log_event("analysis.launched", analysis_id=job.analysis_id, chunks=n_chunks)
     return {"analysis_id": job.analysis_id, "launched": True, "stage_task_ids": ids}
@@ -189,7 +196,14 @@ def launch(job: AnalysisJob, n_chunks: int, *, root_id: str | None) -> dict:
 )
 def prepare(self, job_json: dict) -> str:
     job = AnalysisJob.from_json(job_json)
-    return str(_run(self, job, "prepare", lambda: jobs.run_prepare(job, publish=_publisher(self))))
+    return str(
+        _run(
+            self,
+            job,
+            "prepare",
+            lambda: jobs.run_prepare(job, pipeline=ENGINE, publish=_publisher(self)),
+        )
+    )
 
 
 @app.task(
@@ -206,7 +220,9 @@ def candidates(self, job_json: dict, index: int, n_chunks: int) -> str:
             self,
             job,
             "candidates",
-            lambda: jobs.run_candidates(job, index, n_chunks, publish=_publisher(self)),
+            lambda: jobs.run_candidates(
+                job, index, n_chunks, pipeline=ENGINE, publish=_publisher(self)
+            ),
         )
     )
 
@@ -230,7 +246,9 @@ def select(self, job_json: dict, n_chunks: int) -> dict:
         self,
         job,
         "select",
-        lambda: jobs.run_select(job, n_chunks, publish=_publisher(self), on_result=on_result),
+        lambda: jobs.run_select(
+            job, n_chunks, pipeline=ENGINE, publish=_publisher(self), on_result=on_result
+        ),
     )
     return _done(job, path)
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from typing import Protocol
 
+from app.core.validation import engine_domain
 from worker.contract import AnalysisJob
 
 
@@ -47,17 +48,18 @@ class CeleryQueue:
 
 
 def analysis_job(analysis, reference, engine_preset: str = "") -> AnalysisJob:
-    """The worker payload of an analysis row: paths, settings, and how to read the BVH."""
-    domain = reference.domain_config or {}
+    """The worker payload of an analysis row: paths, settings, and the reference's domain
+    and import options as data (the reference's ``domain_config``, stored once)."""
+    config = reference.domain_config or {}
     return AnalysisJob(
         analysis_id=analysis.id,
         reference_path=reference.bvh_path,
         video_path=analysis.video_path,
         work_dir=analysis.work_dir,
-        domain_path=reference.domain_path,
         settings={"preset": engine_preset} if engine_preset else {},
-        reference_mapping=domain.get("mapping") or None,
-        reference_units_to_m=domain.get("units_to_m"),
+        domain=engine_domain(config) if config else None,
+        reference_mapping=config.get("mapping") or None,
+        reference_units_to_m=config.get("units_to_m"),
     )
 
 

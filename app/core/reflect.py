@@ -14,7 +14,6 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 import httpx
@@ -27,11 +26,10 @@ from app.core.security import sign_webhook
 from app.core.storage import Storage
 from app.models import ANALYSIS_STATES, TERMINAL_STATES, Analysis, utcnow
 from app.schemas import AnalysisPublic
+from worker.contract import AnalysisFolder
 
 log = logging.getLogger("app.reflect")
 
-STATUS_FILE = "status.json"
-RESULT_FILE = "result.json"
 
 #: Called with the analysis after this process moved it into a final state.
 OnFinal = Callable[[Analysis], None]
@@ -45,9 +43,9 @@ def reflect(session: Session, analysis: Analysis, *, on_final: OnFinal | None = 
     """Update ``analysis`` from its folder; returns True when the row changed."""
     if analysis.status in TERMINAL_STATES:
         return False
-    work = Path(analysis.work_dir)
-    status = Storage.read_json(work / STATUS_FILE) or {}
-    result_file = work / RESULT_FILE
+    folder = AnalysisFolder(analysis.work_dir)
+    status = Storage.read_json(folder.status) or {}
+    result_file = folder.result
     state = status.get("state") if status.get("state") in ANALYSIS_STATES else analysis.status
     values: dict[str, Any] = {
         "status": state,

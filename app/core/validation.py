@@ -56,7 +56,8 @@ IMPORT_KEYS = ("mapping", "units_to_m")
 
 
 def engine_domain(domain: dict[str, Any]) -> dict[str, Any]:
-    """The part of the domain JSON the engine reads from ``<ref>.domain.json``."""
+    """The part of the domain JSON that is the engine's domain document (each analysis
+    request carries it: ``AnalysisJob.domain``); the rest says how to import the BVH."""
     return {k: v for k, v in domain.items() if k not in IMPORT_KEYS}
 
 

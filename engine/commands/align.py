@@ -53,7 +53,9 @@ def plot_matrix(cost: np.ndarray, C: np.ndarray, path: Path) -> None:
 def run(args: argparse.Namespace) -> int:
     from engine.io.bvh import load_reference
     from engine.io.video import read_video
-    from engine.stages import AlignmentSettings, run_stages_0_2_full
+    from engine.pipeline import run_stages_0_2
+    from engine.settings import Settings
+    from engine.stages.alignment import AlignmentSettings
 
     t_all = time.perf_counter()
     t0 = time.perf_counter()
@@ -66,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
     settings = AlignmentSettings(
         k=args.k, band_fraction=args.band, float_start=args.float_ends, float_end=args.float_ends
     )
-    st = run_stages_0_2_full(ref, video, alignment=settings)
+    st = run_stages_0_2(ref, video, Settings(alignment=settings))
     fg, camera, res, timing = st.foreground, st.camera, st.alignment, st.timing_s
     timing = {"read_reference": t_ref, "read_video": t_video, **timing}
     timing["total"] = time.perf_counter() - t_all

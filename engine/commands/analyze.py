@@ -81,6 +81,7 @@ def read_video_count(path: str) -> int:
 
 def run(args: argparse.Namespace) -> int:
     from engine.io.result import write_result, write_text
+    from engine.io.result_reader import Result
     from engine.report import build_report_html
 
     for name in ("reference", "video"):
@@ -88,25 +89,29 @@ def run(args: argparse.Namespace) -> int:
             raise InvalidInput(f"{name}: {getattr(args, name)} does not exist")
     from engine.io.video import read_video
     from engine.pipeline import analyze
+    from engine.reference.domain import find_domain
+    from engine.settings import Settings
 
     n = read_video_count(args.video)
     frames = parse_frames(args.frames, n) if args.frames else None
     preset = args.preset or ("fast" if args.fast else "default")
-    settings = {"preset": preset, "seed": args.seed}
+    settings = Settings.from_dict({"preset": preset, "seed": args.seed})
     doc = analyze(
-        args.reference, args.video, settings, frames=frames, on_progress=_progress(args.quiet)
-    )
+        args.reference, args.video, settings, domain=find_domain(args.reference),
+        frames=frames, on_progress=_progress(args.quiet),
+    )  # fmt: skip
     write_result(doc, args.out)
+    result = Result.from_dict(doc)
     if not args.quiet:
-        summary = doc["summary"]
-        print(f"\nwrote {args.out}: {summary['status']}, mean posture error "
-              f"{summary['mean_error_deg']:.1f} deg")  # fmt: skip
-        for m in doc["summary"]["messages"]:
+        summary = result.summary
+        print(f"\nwrote {args.out}: {summary.status}, mean posture error "
+              f"{summary.mean_error_deg:.1f} deg")  # fmt: skip
+        for m in summary.messages:
             print(f"  {m}")
     if args.report:
         a, b = frames or (0, n)
-        video = read_video(args.video, height=doc["video"]["height"], max_frames=b)
-        write_text(build_report_html(doc, video.frames[a:b]), args.report)
+        video = read_video(args.video, height=result.video.height, max_frames=b)
+        write_text(build_report_html(result, video.frames[a:b]), args.report)
         if not args.quiet:
             print(f"wrote {args.report}")
     return 0

@@ -104,16 +104,17 @@ def _from_stages(
     args: argparse.Namespace, frames_spec: str, settings: Settings
 ) -> tuple[_Inputs, range]:
     from engine.io.bvh import load_reference
-    from engine.pipeline import original_pixels, prepare
+    from engine.pipeline import prepare
+    from engine.reference.domain import find_domain
 
-    p = prepare(args.reference, args.video, settings)
+    p = prepare(args.reference, args.video, settings, domain=find_domain(args.reference))
     frames = _frames(frames_spec, p.n_frames)
     idx = np.asarray(frames)
     v = p.video
     inputs = _Inputs(
-        load_reference(args.reference), p.n_frames, float(v["fps"]), p.silhouettes[idx],
-        p.edges[idx], p.camera, original_pixels(p.camera, v["original_width"],
-        v["original_height"]), p.shape, p.C[idx].astype(float), p.initial_postures(frames),
+        load_reference(args.reference), p.n_frames, v.fps, p.silhouettes[idx], p.edges[idx],
+        p.camera, p.camera.resized(v.original_width, v.original_height), p.shape,
+        p.C[idx].astype(float), p.initial_postures(frames),
         dict(p.timing_s),
     )  # fmt: skip
     return inputs, frames

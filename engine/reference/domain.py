@@ -1,4 +1,7 @@
-"""Per-reference domain knowledge (thesis 6.8), read from ``<ref>.domain.json`` beside the BVH.
+"""Per-reference domain knowledge (thesis 6.8): a JSON document a coach gives with a reference.
+
+The service stores it with the reference and passes it in every analysis request; the
+command line reads it from ``<ref>.domain.json`` beside the BVH (:func:`find_domain`).
 
 A coach states what matters in this motion: segment names, per-bone weights (the torso
 matters more than the knees in Taichi) and per-bone tolerances in degrees (a "high" or "low"
@@ -67,6 +70,10 @@ class Domain:
         Joints whose direction change marks a boundary (empty: stage-4 default).
     direction_change_deg : float or None
         Boundary threshold (thesis 5.4.2: 60 Taichi, 120 golf); None: stage-4 default.
+    doc : dict or None
+        The validated document it was parsed from (:func:`parse_domain`; None for a domain
+        built in code): what a stage output stores, so reading it back gives this domain
+        exactly.
     """
 
     sport: str = ""
@@ -76,6 +83,7 @@ class Domain:
     tolerances: np.ndarray = field(default_factory=lambda: np.zeros(N_BONES))
     boundary_joints: tuple[str, ...] = ()
     direction_change_deg: float | None = None
+    doc: dict[str, Any] | None = field(default=None, compare=False, repr=False)
 
     def score(self, bone_errors: np.ndarray) -> np.ndarray:
         """Domain-specific error: weighted mean of the excess over each bone's tolerance.
@@ -160,6 +168,24 @@ def parse_domain(doc: Any, *, n_segments: int | None = None, source: str = "doma
         raise InvalidInput(f"{source}: unknown keys {unknown}; allowed {sorted(_KEYS)}")
     if doc.get("version", 1) != 1:
         raise InvalidInput(f"{source}.version: expected 1, got {doc.get('version')!r}")
+    sport = doc.get("sport", "")
+    if not isinstance(sport, str):
+        raise InvalidInput(f"{source}.sport: expected a string")
+    names, starts = _segments(doc, source, n_segments)
+    weights, tolerances = _bone_numbers(doc, source)
+    joints, change = _boundary(doc.get("boundary", {}), f"{source}.boundary")
+    return Domain(
+        sport=sport, segment_names=names, segment_starts=starts, bone_weights=weights,
+        tolerances=tolerances, boundary_joints=joints, direction_change_deg=change,
+        doc=dict(doc),
+    )  # fmt: skip
+
+
+def _segments(
+    doc: dict, source: str, n_segments: int | None
+) -> tuple[tuple[str, ...], tuple[int, ...]]:
+    """``segment_names`` and ``segments`` (starts), checked against each other and against
+    ``n_segments`` detected segments when the document sets no starts."""
     names = doc.get("segment_names", [])
     if not isinstance(names, list) or not all(isinstance(n, str) and n for n in names):
         raise InvalidInput(f"{source}.segment_names: expected a list of non-empty strings")
@@ -183,6 +209,11 @@ def parse_domain(doc: Any, *, n_segments: int | None = None, source: str = "doma
             f"{source}.segment_names: the reference has {n_segments} segments, "
             f"got {len(names)} names"
         )
+    return tuple(names), tuple(starts)
+
+
+def _bone_numbers(doc: dict, source: str) -> tuple[np.ndarray, np.ndarray]:
+    """Per-bone weights (16,) and tolerances (16,), radians."""
     weights = _per_bone(doc.get("bone_weights"), f"{source}.bone_weights", 1.0)
     if weights.sum() <= 0:
         raise InvalidInput(f"{source}.bone_weights: at least one weight must be positive")
@@ -190,29 +221,22 @@ def parse_domain(doc: Any, *, n_segments: int | None = None, source: str = "doma
     tol = _per_bone(doc.get("tolerances_deg"), f"{source}.tolerances_deg", default_tol)
     if (tol > 180).any():
         raise InvalidInput(f"{source}.tolerances_deg: tolerances must be at most 180 deg")
-    boundary = doc.get("boundary", {})
+    return weights, np.radians(tol)
+
+
+def _boundary(boundary: Any, where: str) -> tuple[tuple[str, ...], float | None]:
+    """The boundary joints and direction-change threshold (thesis 5.4.2)."""
     if not isinstance(boundary, dict) or set(boundary) - {"joints", "direction_change_deg"}:
-        raise InvalidInput(
-            f"{source}.boundary: expected {{'joints': [...], 'direction_change_deg': x}}"
-        )
+        raise InvalidInput(f"{where}: expected {{'joints': [...], 'direction_change_deg': x}}")
     joints = boundary.get("joints", [])
     if not isinstance(joints, list) or any(j not in JOINT_INDEX for j in joints):
-        raise InvalidInput(f"{source}.boundary.joints: expected joint names from {list(JOINTS)}")
+        raise InvalidInput(f"{where}.joints: expected joint names from {list(JOINTS)}")
     change = boundary.get("direction_change_deg")
     if change is not None:
-        change = _number(change, f"{source}.boundary.direction_change_deg")
+        change = _number(change, f"{where}.direction_change_deg")
         if change > 180:
-            raise InvalidInput(
-                f"{source}.boundary.direction_change_deg: expected <= 180, got {change}"
-            )
-    sport = doc.get("sport", "")
-    if not isinstance(sport, str):
-        raise InvalidInput(f"{source}.sport: expected a string")
-    return Domain(
-        sport=sport, segment_names=tuple(names), segment_starts=tuple(starts),
-        bone_weights=weights, tolerances=np.radians(tol), boundary_joints=tuple(joints),
-        direction_change_deg=change,
-    )  # fmt: skip
+            raise InvalidInput(f"{where}.direction_change_deg: expected <= 180, got {change}")
+    return tuple(joints), change
 
 
 def reference_segments(motion: Motion, domain: Domain | None) -> Segments:

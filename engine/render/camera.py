@@ -115,6 +115,21 @@ class Camera:
         """A copy with some fields changed."""
         return replace(self, **changes)
 
+    def resized(self, width: int, height: int) -> Camera:
+        """This camera re-expressed for the same image at ``width`` x ``height`` pixels
+        (the working-resolution camera in the video file's own pixels).
+
+        Pixel centres sit on integers at both resolutions, so u_new = (u + 0.5) / k - 0.5.
+        """
+        k = self.height / height
+        if abs(k - 1.0) < 1e-12:
+            return self
+        return Camera(
+            scale=self.scale / k, theta_z=self.theta_z, cx=(self.cx + 0.5) / k - 0.5,
+            cy=(self.cy + 0.5) / k - 0.5, azimuth=self.azimuth, width=width, height=height,
+            distance=self.distance,
+        )  # fmt: skip
+
     def to_dict(self) -> dict:
         """The DESIGN.md ``camera`` block (degrees at the edge)."""
         return {

@@ -65,7 +65,7 @@ class CalibrationSettings:
         1.84 -> 1.80).
     fit_width : bool
         After the camera, fit the performer's capsule radii per part group
-        (:func:`fit_body_shape`; used by :func:`engine.stages.run_stages_0_2_full`).
+        (:func:`fit_body_shape`; used by :func:`engine.pipeline.run_stages_0_2`).
     refine_top : int
         Azimuths (the best by the PCA fit's d_S) refined; the best refined fit wins. The PCA
         ranking alone is fragile: on a synthetic case (``coach synth 64_29 --seed 3``) -15 deg
@@ -73,7 +73,7 @@ class CalibrationSettings:
         against 0.38).
     check_mirror : bool
         Let the whole video choose between the best azimuth and the best one facing the
-        other way (:func:`mirror_azimuth`; used by :func:`engine.stages.run_stages_0_2_full`).
+        other way (:func:`mirror_azimuth`; used by :func:`engine.pipeline.run_stages_0_2`).
         One frame's silhouette hardly tells a front view from a back view: on P2 the refined
         fits score 0.485 (front) and 0.466 (back), and the back view wins. Stage 2's mean cost
         E_C over the whole video separates them clearly (P2 0.38 front / 0.56 back, P1 0.32 /
@@ -440,6 +440,59 @@ def calibrate(
     RegistrationFailed
         No sampled azimuth gives a usable camera.
     """
+    j, sil = _check_calibration_frame(joints, silhouette, edges, settings)
+    kp = _usable_keypoints(keypoints, settings)
+    frame = _CalibrationFrame(
+        joints=j, shape=shape, silhouette=sil,
+        target=capsules.Target.from_masks(sil, np.asarray(edges, dtype=bool)),
+        keypoints=kp, readings=None if kp is None else readings(*kp), facing=facing,
+    )  # fmt: skip
+    scores, cams = _sample_azimuths(frame, settings, on_progress)
+    if not scores:
+        raise RegistrationFailed("the camera could not be calibrated from the first frame")
+    d, cam = _refine_best(frame, scores, cams, settings)
+    if settings.refine and settings.above_ankles:
+        cam, _ = _refine_above_ankles(j, shape, sil, cam)
+    if on_progress is not None:
+        on_progress("calibration", 1.0)
+    return cam, {"azimuth_scores": scores, "d_S": d}
+
+
+@dataclass(frozen=True)
+class _CalibrationFrame:
+    """What stage 1 compares each view with: the posture and the calibration frame's evidence.
+
+    Attributes
+    ----------
+    joints : ndarray, shape (17, 3)
+        Calibration posture B_0.
+    shape : BodyShape
+    silhouette : ndarray of bool, shape (H, W)
+        The frame's body region.
+    target : capsules.Target
+        The region (and its edges) prepared for d_S.
+    keypoints : (ndarray (17, 2), ndarray (17,)) or None
+        The frame's 2D keypoints and confidences, when usable (:func:`_usable_keypoints`).
+    readings : (ndarray (2, 17, 2), ndarray (2, 17)) or None
+        Their two readings for d_K (:func:`engine.stages.perception.readings`).
+    facing : int
+        +1 the pose model saw the face, -1 the back of the head, 0 unknown.
+    """
+
+    joints: np.ndarray
+    shape: BodyShape
+    silhouette: np.ndarray
+    target: capsules.Target
+    keypoints: tuple[np.ndarray, np.ndarray] | None
+    readings: tuple[np.ndarray, np.ndarray] | None
+    facing: int
+
+
+def _check_calibration_frame(
+    joints: np.ndarray, silhouette: np.ndarray, edges: np.ndarray, s: CalibrationSettings
+) -> tuple[np.ndarray, np.ndarray]:
+    """The posture (17, 3) as floats and the region (H, W) as bool, or InvalidInput naming
+    the parameter."""
     j = np.asarray(joints, dtype=float)
     if j.shape != (17, 3) or not np.all(np.isfinite(j)):
         raise InvalidInput(f"joints must be a finite (17, 3) posture, got shape {j.shape}")
@@ -454,54 +507,90 @@ def calibrate(
             "the calibration frame shows no body region (the performer must be visible in the "
             "first frame)"
         )
-    if not settings.azimuths_deg:
+    if not s.azimuths_deg:
         raise InvalidInput("settings.azimuths_deg must name at least one azimuth")
-    target = capsules.Target.from_masks(sil, np.asarray(edges, dtype=bool))
+    return j, sil
+
+
+def _usable_keypoints(
+    keypoints: tuple[np.ndarray, np.ndarray] | None, s: CalibrationSettings
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The keypoints (17, 2) and confidences (17,) when they are to be used: weighted, and
+    at least three confident ones (fewer cannot place a similarity)."""
+    if keypoints is None or not s.keypoint_weight > 0:
+        return None
+    if np.count_nonzero(keypoints[1] > 0) < 3:
+        return None
+    return keypoints
+
+
+def _view_camera(frame: _CalibrationFrame, az_deg: float) -> Camera:
+    """The first camera at one azimuth: from the keypoints when there are any, else the
+    thesis' PCA (4.2). Raises InvalidInput when the posture cannot be placed in the image."""
+    az = float(np.radians(az_deg))
+    if frame.keypoints is not None:
+        h, w = frame.silhouette.shape
+        return keypoint_camera(frame.joints, *frame.keypoints, azimuth=az, width=w, height=h)
+    return pca_camera(frame.joints, frame.shape, frame.silhouette, azimuth=az)
+
+
+def _view_score(
+    frame: _CalibrationFrame, cam: Camera, az_deg: float, s: CalibrationSettings
+) -> float:
+    """d_S (eq. 4.4) of the posture at ``cam``, plus the facing penalty and the keypoint
+    term (beyond the thesis)."""
+    d = float(
+        capsules.d_S_batch(frame.joints[None], frame.target, frame.shape, cam,
+                           lambda_A=s.lambda_A, lambda_E=s.lambda_E)[0]
+    ) + _facing_cost(float(az_deg), frame.facing, s.facing_penalty)  # fmt: skip
+    if frame.readings is not None:
+        d += s.keypoint_weight * _keypoint_cost(
+            frame.joints, frame.readings[0], frame.readings[1], cam, s.keypoint_tau
+        )
+    return d
+
+
+def _sample_azimuths(
+    frame: _CalibrationFrame, s: CalibrationSettings, on_progress: ProgressFn | None
+) -> tuple[dict[float, float], dict[float, Camera]]:
+    """Score and camera per sampled azimuth (degrees), skipping those where the posture
+    cannot be placed (beyond the thesis, which has only the front view)."""
     scores: dict[float, float] = {}
     cams: dict[float, Camera] = {}
-    use_kp = keypoints is not None and settings.keypoint_weight > 0
-    if use_kp and np.count_nonzero(keypoints[1] > 0) < 3:  # type: ignore[index]
-        use_kp = False
-    kp = keypoints if use_kp else None
-    kp_read = None if kp is None else readings(*kp)
-    for i, az in enumerate(settings.azimuths_deg):
+    for i, az in enumerate(s.azimuths_deg):
         try:
-            if kp is not None:
-                cam = keypoint_camera(j, *kp, azimuth=float(np.radians(az)), width=sil.shape[1],
-                                      height=sil.shape[0])  # fmt: skip
-            else:
-                cam = pca_camera(j, shape, sil, azimuth=float(np.radians(az)))
+            cam = _view_camera(frame, az)
         except InvalidInput:  # the posture projects outside the image at this azimuth
             continue
-        scores[float(az)] = float(
-            capsules.d_S_batch(j[None], target, shape, cam, lambda_A=settings.lambda_A,
-                               lambda_E=settings.lambda_E)[0]
-        ) + _facing_cost(float(az), facing, settings.facing_penalty)  # fmt: skip
-        if kp_read is not None:
-            scores[float(az)] += settings.keypoint_weight * _keypoint_cost(
-                j, kp_read[0], kp_read[1], cam, settings.keypoint_tau
-            )
+        scores[float(az)] = _view_score(frame, cam, az, s)
         cams[float(az)] = cam
         if on_progress is not None:
-            on_progress("calibration", (i + 1) / (len(settings.azimuths_deg) + 1))
-    if not scores:
-        raise RegistrationFailed("the camera could not be calibrated from the first frame")
-    # PCA scores rank the azimuths roughly; the refined fit decides among the best few
-    n_top = max(1, settings.refine_top) if settings.refine else 1
+            on_progress("calibration", (i + 1) / (len(s.azimuths_deg) + 1))
+    return scores, cams
+
+
+def _refine_best(
+    frame: _CalibrationFrame,
+    scores: dict[float, float],
+    cams: dict[float, Camera],
+    s: CalibrationSettings,
+) -> tuple[float, Camera]:
+    """The best camera and its score after refining the ``s.refine_top`` best azimuths.
+
+    The first scores rank the azimuths roughly; the refined fit decides among the best few
+    (ties go to the smaller azimuth).
+    """
+    n_top = max(1, s.refine_top) if s.refine else 1
     top = sorted(scores, key=lambda az: scores[az])[:n_top]
     fits = []
     for az in top:
         cam, d = cams[az], scores[az]
-        if settings.refine:
-            cam, d = _refine(j, shape, target, cam, settings, kp_read)
-            d += _facing_cost(az, facing, settings.facing_penalty)
+        if s.refine:
+            cam, d = _refine(frame.joints, frame.shape, frame.target, cam, s, frame.readings)
+            d += _facing_cost(az, frame.facing, s.facing_penalty)
         fits.append((d, az, cam))
     d, _, cam = min(fits, key=lambda f: (f[0], f[1]))
-    if settings.refine and settings.above_ankles:
-        cam, _ = _refine_above_ankles(j, shape, sil, cam)
-    if on_progress is not None:
-        on_progress("calibration", 1.0)
-    return cam, {"azimuth_scores": scores, "d_S": d}
+    return d, cam
 
 
 def refine_on_frames(

@@ -16,14 +16,15 @@ The model sits behind :class:`PoseModel`, so another one can replace it. The def
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
 
 from engine.body.skeleton import JOINTS
-from engine.errors import InvalidInput
+from engine.errors import InvalidInput, RegistrationFailed
+from engine.render.camera import Camera
 
 ProgressFn = Callable[[str, float], None]
 
@@ -368,3 +369,65 @@ def resolve_swaps(
                                                  axis=-1), 0.0)  # fmt: skip
     w = confidence
     return (dm * w[:, MIRROR]).sum(1) < (d * w).sum(1)
+
+
+def check_person_found(
+    flags: Sequence[Sequence[str]], perception: Perception | None, min_fraction: float
+) -> None:
+    """Refuse a video where nobody is found, rather than fit the reference to nothing.
+
+    A frame shows a person when the pose model detected one there or stage 0's region is not
+    flagged ``no_person`` (a pose model trained on photographs may miss a rendered or
+    unusual figure that the background difference still finds; what is then found but is not
+    a body ends ``poor_fit``, :func:`engine.stages.assessment.assess_fit`).
+
+    Raises
+    ------
+    RegistrationFailed
+        Fewer than ``min_fraction`` of the frames show a person.
+    """
+    seen = np.array(["no_person" not in f for f in flags], bool)
+    if perception is not None:
+        seen |= np.asarray(perception.detected, bool)
+    found = float(seen.mean())
+    if found < min_fraction:
+        raise RegistrationFailed(
+            f"We could not find a person in this video (only {100 * found:.0f} % of the "
+            "frames show one). Film the whole body, from head to feet, in good light, "
+            "standing out from the background."
+        )
+
+
+def offsets_on_first_frames(
+    perception: Perception, camera: Camera, posture: np.ndarray, n_frames: int
+) -> np.ndarray:
+    """The detector's offsets (17, 2) on the first ``n_frames`` frames, which show
+    ``posture`` (17, 3) by stage 1's assumption; zeros when fewer than two of them have a
+    detection."""
+    idx = np.flatnonzero(perception.detected[:n_frames])
+    if idx.size < 2:
+        return np.zeros((17, 2))
+    pred = np.broadcast_to(camera.project(posture), (idx.size, 17, 2))
+    return keypoint_offsets(perception.keypoints[idx], perception.confidence[idx], pred)
+
+
+def calibration_keypoints(
+    perception: Perception | None, k: int, max_gap: int
+) -> tuple[tuple[np.ndarray, np.ndarray] | None, int]:
+    """Keypoints and confidences (17, 2), (17,) for calibration frame k, and the facing.
+
+    Where the pose model lost the person in frame k, the nearest frame that has him within
+    ``max_gap`` frames stands in (a performer starts still, in the reference's first
+    posture). The facing is the majority of the frames up to ``max_gap`` after k.
+    """
+    if perception is None:
+        return None, 0
+    found = np.flatnonzero(perception.detected)
+    if found.size == 0:
+        return None, 0
+    j = int(found[np.argmin(np.abs(found - k))])
+    if abs(j - k) > max_gap:
+        return None, 0
+    window = perception.facing[k : k + max_gap + 1][perception.detected[k : k + max_gap + 1]]
+    facing = int(np.sign(window.sum())) if window.size else 0
+    return (perception.keypoints[j], perception.confidence[j]), facing

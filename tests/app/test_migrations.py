@@ -58,4 +58,9 @@ def test_references_get_the_segments_their_analyses_use(tmp_path, cmu_bvh):
     assert derived[1]["segments"] == [1, 200, 400, 579]  # the coach's starts, then the end
     assert len(derived[2]["segments"]) == 4  # 64_29's three detected segments
     assert derived[3] == {"segments": []}  # its BVH is gone: left as it was
-    assert json.loads(domain_file.read_text())["segments"] == [1, 200, 400]
+    # 0005: the domain lives only in domain_config; the file beside the BVH and its column go
+    assert not domain_file.exists()
+    with engine.connect() as conn:
+        columns = [c[1] for c in conn.execute(text('PRAGMA table_info("references")')).all()]
+        config = conn.execute(text('SELECT domain_config FROM "references" WHERE id = 1')).scalar()
+    assert "domain_path" not in columns and json.loads(config) == old

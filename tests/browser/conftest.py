@@ -70,8 +70,9 @@ def clip(tmp_path_factory) -> Path:
 @pytest.fixture(scope="session")
 def clip_result(clip: Path) -> dict:
     from engine.pipeline import analyze
+    from engine.settings import Settings
 
-    return analyze(CMU / "64_29.bvh", clip, {"preset": "fast"})
+    return analyze(CMU / "64_29.bvh", clip, Settings.from_dict({"preset": "fast"}))
 
 
 @dataclass

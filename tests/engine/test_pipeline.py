@@ -11,6 +11,7 @@ from engine.io.bvh import write_bvh
 from engine.io.case import write_case
 from engine.io.result import validate_result
 from engine.pipeline import CandidateChunk, Prepared, analyze, candidates, prepare, select
+from engine.settings import Settings
 from engine.stages.selection import SelectionSettings
 from engine.synth import SynthSettings, synthesize
 from engine.types import Motion, Segments
@@ -22,6 +23,7 @@ SETTINGS = {
     "chunk_frames": 8,
     "candidates": {"n_samples": 8, "n_iterations": 2, "refine_sweeps": 1, "n_candidates": 4},
 }
+S = Settings.from_dict(SETTINGS)
 
 
 @pytest.fixture(scope="module")
@@ -52,7 +54,7 @@ def case_dir(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def prepared(case_dir) -> Prepared:
-    return prepare(case_dir["reference"], case_dir["video"], SETTINGS)
+    return prepare(case_dir["reference"], case_dir["video"], S)
 
 
 def _same(a, b) -> None:
@@ -83,7 +85,7 @@ def test_initial_postures_are_the_turned_and_the_plain_reference(prepared) -> No
 
 
 def test_candidate_chunk_round_trip_and_select(prepared, tmp_path) -> None:
-    chunks = [candidates(prepared, r, SETTINGS) for r in prepared.chunks(2)]
+    chunks = [candidates(prepared, r, S) for r in prepared.chunks(2)]
     for i, c in enumerate(chunks):
         assert len(c.candidates) == len(c.d_s) == len(c.frames)
         assert all(len(k) == len(d) for k, d in zip(c.candidates, c.d_s, strict=True))
@@ -94,29 +96,31 @@ def test_candidate_chunk_round_trip_and_select(prepared, tmp_path) -> None:
             np.testing.assert_array_equal(k0, k1)
             np.testing.assert_array_equal(d0, d1)
         assert back.flags == c.flags
-    doc = select(prepared, chunks[::-1], SETTINGS)  # any order
+    doc = select(prepared, chunks[::-1], S)  # any order
     validate_result(doc)
     with pytest.raises(InvalidInput, match="cover every video frame"):
-        select(prepared, chunks[:1], SETTINGS)
+        select(prepared, chunks[:1], S)
 
 
 def test_candidates_do_not_depend_on_the_chunking(prepared) -> None:
     # one chunk or three: every frame gets the same candidates (per-frame random streams)
-    whole = candidates(prepared, range(2, 8), SETTINGS)
-    parts = [candidates(prepared, r, SETTINGS) for r in (range(2, 3), range(3, 6), range(6, 8))]
+    whole = candidates(prepared, range(2, 8), S)
+    parts = [candidates(prepared, r, S) for r in (range(2, 3), range(3, 6), range(6, 8))]
     cut = [k for c in parts for k in c.candidates]
     assert len(cut) == len(whole.candidates) == 6
     for a, b in zip(whole.candidates, cut, strict=True):
         np.testing.assert_array_equal(a, b)
     # the previous frame's candidates as extra starts (6.7) still work, threaded within a chunk
     prev = {**SETTINGS, "candidates": {**SETTINGS["candidates"], "n_prev": 3}}
-    assert candidates(prepared, range(2, 8), prev).frames.tolist() == list(range(2, 8))
+    assert candidates(prepared, range(2, 8), Settings.from_dict(prev)).frames.tolist() == list(
+        range(2, 8)
+    )
 
 
 def test_analyze_gives_a_valid_result(case_dir) -> None:
     import json
 
-    doc = analyze(case_dir["reference"], case_dir["video"], SETTINGS)
+    doc = analyze(case_dir["reference"], case_dir["video"], S)
     validate_result(doc)
     json.dumps(doc, allow_nan=False)  # a browser's JSON.parse refuses NaN
     n = len(doc["frames"])
@@ -128,7 +132,7 @@ def test_analyze_gives_a_valid_result(case_dir) -> None:
 
 
 def test_frames_the_video_does_not_confirm_are_flagged():
-    from engine.pipeline import flag_image_misfit
+    from engine.stages.assessment import flag_image_misfit
     from engine.stages.selection import Selection
 
     n = 4
@@ -196,7 +200,7 @@ def test_a_video_with_nobody_in_it_fails_with_a_plain_message(case_dir, tmp_path
     frames = np.clip(frames + rng.normal(0, 1.5, frames.shape), 0, 255).astype(np.uint8)
     write_video(tmp_path / "empty.mp4", frames, 15.0)
     with pytest.raises(RegistrationFailed, match="could not find a person"):
-        prepare(case_dir["reference"], tmp_path / "empty.mp4", SETTINGS)
+        prepare(case_dir["reference"], tmp_path / "empty.mp4", S)
 
 
 def test_a_region_that_is_not_a_body_ends_poor_fit_not_ok(prepared) -> None:
@@ -204,18 +208,18 @@ def test_a_region_that_is_not_a_body_ends_poor_fit_not_ok(prepared) -> None:
     says so instead of reporting errors as the performer's."""
     import dataclasses
 
-    from engine.pipeline import assess_fit
+    from engine.stages.assessment import assess_fit
 
     sil = np.zeros_like(prepared.silhouettes)
     sil[:, 10:110, 20:140] = True  # a rectangle of "body" filling the picture
     bad = dataclasses.replace(prepared, silhouettes=sil, edges=np.zeros_like(sil))
-    chunks = [candidates(bad, r, SETTINGS) for r in bad.chunks(1)]
-    doc = select(bad, chunks, SETTINGS)
+    chunks = [candidates(bad, r, S) for r in bad.chunks(1)]
+    doc = select(bad, chunks, S)
     assert doc["summary"]["status"] == "poor_fit"
     assert "separate you from the background" in doc["summary"]["messages"][0]
     # the real regions fit: the same check leaves the status alone
-    good = select(prepared, [candidates(prepared, r, SETTINGS) for r in prepared.chunks(1)],
-                  SETTINGS)  # fmt: skip
+    good = select(prepared, [candidates(prepared, r, S) for r in prepared.chunks(1)],
+                  S)  # fmt: skip
     assert good["summary"]["status"] != "poor_fit"
     assert good["summary"]["fit"]["region_mismatch_median"] < 0.3
     doc2 = {"summary": {"status": "ok", "messages": []}}
@@ -230,7 +234,7 @@ def test_reported_motion_that_leaves_the_keypoints_ends_poor_fit(prepared) -> No
     import dataclasses
     import json
 
-    from engine.pipeline import assess_fit
+    from engine.stages.assessment import assess_fit
 
     postures = prepared.reference_joints[prepared.C]
     kp = prepared.camera.project(postures)
@@ -262,13 +266,14 @@ def test_reported_motion_that_leaves_the_keypoints_ends_poor_fit(prepared) -> No
 def test_the_thesis_preset_runs_without_the_pose_model(case_dir) -> None:
     import json
 
-    p = prepare(case_dir["reference"], case_dir["video"], {**SETTINGS, "preset": "thesis"})
+    p = prepare(case_dir["reference"], case_dir["video"],
+                Settings.from_dict({**SETTINGS, "preset": "thesis"}))  # fmt: skip
     assert p.keypoints is None and p.perception_model == ""
     # and still finds the timing as it did before the pose model (the figure of
     # test_candidates_command_runs_stages_0_to_3_and_writes_a_scorable_result)
     truth = json.loads(open(case_dir["truth"]).read())
     true_c = np.array([f["reference_frame"] for f in truth["frames"]])
     assert np.abs(p.C - true_c).max() <= 8
-    q = prepare(case_dir["reference"], case_dir["video"], SETTINGS)
+    q = prepare(case_dir["reference"], case_dir["video"], S)
     assert q.keypoints is not None and q.keypoints.shape == (q.n_frames, 17, 2)
     assert q.perception_model.startswith("mediapipe")

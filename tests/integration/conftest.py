@@ -97,7 +97,11 @@ class Workers:
     def __init__(self, env: dict, log_dir: Path):
         self.env, self.log_dir, self.procs = env, log_dir, []
 
-    def start(self, concurrency: int = 1, name: str | None = None) -> subprocess.Popen:
+    def start(
+        self, concurrency: int = 1, name: str | None = None, app: str = "worker.celery_app"
+    ) -> subprocess.Popen:
+        """A worker process of ``app`` (``tests.worker.fake_app``: the same tasks over the fake
+        engine)."""
         name = name or f"w{len(self.procs)}"
         log = open(self.log_dir / f"{name}.log", "ab")  # noqa: SIM115 - closed with the process
         proc = subprocess.Popen(
@@ -106,7 +110,7 @@ class Workers:
                 "-m",
                 "celery",
                 "-A",
-                "worker.celery_app",
+                app,
                 "worker",
                 "--concurrency",
                 str(concurrency),
@@ -153,7 +157,6 @@ def worker_env(tmp_path, redis_url) -> dict:
         PYOPENGL_PLATFORM="egl",
         COACH_CHUNKS="2",
     )
-    env.pop("COACH_PIPELINE_MODULE", None)
     return env
 
 

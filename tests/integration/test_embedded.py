@@ -3,14 +3,14 @@ started by worker.embedded (what `coach serve` does). No Redis."""
 
 from __future__ import annotations
 
-import importlib.util
 import os
 
 import pytest
 
 from tests.integration.conftest import REPO, finished, make_job, wait_for
 from tests.integration.test_redis_worker import ENGINE_CHEAP_SETTINGS
-from worker import celery_app, embedded, jobs
+from worker import celery_app, embedded
+from worker.contract import AnalysisFolder
 from worker.settings import WorkerSettings
 
 pytestmark = pytest.mark.integration
@@ -22,9 +22,6 @@ def embedded_worker(tmp_path, monkeypatch):
         monkeypatch.delenv(name, raising=False)
     monkeypatch.setenv("COACH_CHUNKS", "2")
     monkeypatch.setenv("PYTHONPATH", str(REPO))
-    if importlib.util.find_spec("engine.pipeline") is None:
-        # Until the engine lands, the embedded plumbing is checked with the fake pipeline.
-        monkeypatch.setenv("COACH_PIPELINE_MODULE", "tests.worker.fake_pipeline")
     data = tmp_path / "data"
     proc = embedded.start(data, concurrency=2)
     yield data, proc
@@ -36,14 +33,11 @@ def test_embedded_end_to_end(embedded_worker, tmp_path, short_video):
     data, proc = embedded_worker
     assert celery_app.current_settings().embedded
     assert embedded.running()
-    settings = (
-        ENGINE_CHEAP_SETTINGS if importlib.util.find_spec("engine.pipeline") else {"fake_frames": 8}
-    )
-    job = make_job(tmp_path, short_video, "e-1", dict(settings))
+    job = make_job(tmp_path, short_video, "e-1", dict(ENGINE_CHEAP_SETTINGS))
     task_id = celery_app.enqueue(job)
     status = wait_for(job.work_dir, finished, 150)
     assert status["state"] == "done", (status, (data / "logs" / "worker.log").read_text()[-3000:])
-    paths = jobs.Paths(job.work_dir)
+    paths = AnalysisFolder(job.work_dir)
     assert paths.result.exists() and all(p.exists() for p in paths.chunks(2))
     root = celery_app.app.AsyncResult(task_id)
     assert root.state == "SUCCESS"  # the chord ran on the file backend (celery.chord_unlock)

@@ -6,7 +6,6 @@ time; ``test_engine_end_to_end`` runs the real engine on a 16-frame cut of a ben
 
 from __future__ import annotations
 
-import importlib.util
 import time
 
 import pytest
@@ -19,7 +18,7 @@ from tests.integration.conftest import (
 )
 from tests.worker import fake_pipeline
 from worker import celery_app, jobs
-from worker.contract import PROGRESS_STATE
+from worker.contract import PROGRESS_STATE, AnalysisFolder
 
 pytestmark = pytest.mark.integration
 
@@ -30,14 +29,17 @@ ENGINE_CHEAP_SETTINGS: dict = {
 }
 
 
+#: The worker app whose tasks run the fake engine (stages of a known length).
+FAKE_APP = "tests.worker.fake_app"
+
+
 @pytest.fixture
 def fake_env(worker_env):
-    worker_env["COACH_PIPELINE_MODULE"] = "tests.worker.fake_pipeline"
     return worker_env
 
 
 def test_canvas_end_to_end_with_progress(fake_env, workers, tmp_path, short_video):
-    workers.start(concurrency=2)
+    workers.start(app=FAKE_APP, concurrency=2)
     job = make_job(
         tmp_path, short_video, "a-canvas", {"fake_frames": 12, "fake_seconds_per_frame": 0.1}
     )
@@ -52,7 +54,7 @@ def test_canvas_end_to_end_with_progress(fake_env, workers, tmp_path, short_vide
     assert PROGRESS_STATE in states
     root = celery_app.app.AsyncResult(task_id)
     assert root.state == "SUCCESS" and root.result["result_path"].endswith("result.json")
-    paths = jobs.Paths(job.work_dir)
+    paths = AnalysisFolder(job.work_dir)
     assert paths.prepared.exists() and all(p.exists() for p in paths.chunks(2))
     result = result_without_timing(paths.result)
     expected_dir = tmp_path / "expected"
@@ -60,7 +62,7 @@ def test_canvas_end_to_end_with_progress(fake_env, workers, tmp_path, short_vide
     expected = type(job)(**{**expected.to_json(), "work_dir": str(expected_dir)})
     jobs.run_all(expected, 2, pipeline=fake_pipeline)
     assert result == {
-        **result_without_timing(jobs.Paths(expected_dir).result),
+        **result_without_timing(AnalysisFolder(expected_dir).result),
         "analysis_id": "a-canvas",
     }
     logs = workers.logs()
@@ -74,24 +76,24 @@ def test_worker_killed_mid_stage_then_restarted_completes(fake_env, workers, tmp
     fake_env["COACH_VISIBILITY_TIMEOUT_S"] = "4"
     fake_env["COACH_RESTORE_INTERVAL_S"] = "1"
     settings = {"fake_frames": 12, "fake_seconds_per_frame": 0.3}
-    first = workers.start(concurrency=1, name="first")
+    first = workers.start(app=FAKE_APP, concurrency=1, name="first")
     job = make_job(tmp_path, short_video, "a-kill", settings)
     celery_app.enqueue(job)
     wait_for(
         job.work_dir, lambda s: s.get("stage") == "candidates" and s["progress"] > 0.4, 60, workers
     )
     workers.kill(first)
-    paths = jobs.Paths(job.work_dir)
+    paths = AnalysisFolder(job.work_dir)
     assert not paths.result.exists()
     before = {p.name for p in paths.stages.glob("*.npz")}
     assert "prepare.npz" in before and len(before) < 3  # killed inside stage 3
-    workers.start(concurrency=1, name="second")
+    workers.start(app=FAKE_APP, concurrency=1, name="second")
     status = wait_for(job.work_dir, finished, 60, workers)
     assert status["state"] == "done", status
     expected = make_job(tmp_path / "x", short_video, "expected", settings)
     jobs.run_all(expected, 2, pipeline=fake_pipeline)
     assert result_without_timing(paths.result) == {
-        **result_without_timing(jobs.Paths(expected.work_dir).result),
+        **result_without_timing(AnalysisFolder(expected.work_dir).result),
         "analysis_id": "a-kill",
     }
     second_log = (workers.log_dir / "second.log").read_text()
@@ -99,7 +101,7 @@ def test_worker_killed_mid_stage_then_restarted_completes(fake_env, workers, tmp
 
 
 def test_engine_error_is_recorded_not_retried(fake_env, workers, tmp_path, short_video):
-    workers.start()
+    workers.start(app=FAKE_APP)
     job = make_job(tmp_path, short_video, "a-bad", {"fake_fail": "invalid"})
     task_id = celery_app.enqueue(job)
     status = wait_for(job.work_dir, finished, 30, workers)
@@ -111,7 +113,7 @@ def test_engine_error_is_recorded_not_retried(fake_env, workers, tmp_path, short
 
 
 def test_cancel_stops_a_running_analysis(fake_env, workers, tmp_path, short_video):
-    workers.start()
+    workers.start(app=FAKE_APP)
     job = make_job(
         tmp_path, short_video, "a-cancel", {"fake_frames": 40, "fake_seconds_per_frame": 0.2}
     )
@@ -125,20 +127,16 @@ def test_cancel_stops_a_running_analysis(fake_env, workers, tmp_path, short_vide
     assert "analysis.cancelled" in workers.logs()  # the running stage stopped itself
     time.sleep(0.5)
     assert jobs.read_status(job.work_dir)["state"] == "cancelled"
-    assert not jobs.Paths(job.work_dir).result.exists()
-    assert not jobs.Paths(job.work_dir).prepared.exists()
+    assert not AnalysisFolder(job.work_dir).result.exists()
+    assert not AnalysisFolder(job.work_dir).prepared.exists()
 
 
-@pytest.mark.skipif(
-    importlib.util.find_spec("engine.pipeline") is None,
-    reason="engine/pipeline.py has not landed yet",
-)
 def test_engine_end_to_end(worker_env, workers, tmp_path, short_video):
     workers.start(concurrency=2)
     job = make_job(tmp_path, short_video, "a-engine", dict(ENGINE_CHEAP_SETTINGS))
     celery_app.enqueue(job)
     status = wait_for(job.work_dir, finished, 150, workers)
     assert status["state"] == "done", status
-    result = result_without_timing(jobs.Paths(job.work_dir).result)
+    result = result_without_timing(AnalysisFolder(job.work_dir).result)
     assert len(result["frames"]) == 16
     assert [f["t"] for f in result["frames"]] == list(range(16))

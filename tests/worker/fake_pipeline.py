@@ -1,7 +1,7 @@
 """A stand-in for :mod:`engine.pipeline` with the same API, controllable timing and failures.
 
 Used by the unit tests (passed as ``pipeline=``) and by integration tests that need a stage of
-known length (``COACH_PIPELINE_MODULE=tests.worker.fake_pipeline``). Settings it reads:
+known length (their workers run ``celery -A tests.worker.fake_app``). Settings it reads:
 ``fake_frames`` (video frames, 12), ``fake_seconds_per_frame`` (0), ``fake_fail`` ("invalid"
 raises InvalidInput in prepare, "registration" RegistrationFailed in select).
 The result is a deterministic function of the inputs' bytes, so runs can be compared.
@@ -19,6 +19,18 @@ import numpy as np
 from engine.errors import InvalidInput, RegistrationFailed
 
 CALLS: list[tuple] = []  # (function, detail) in the calling process; unit tests inspect it
+
+
+class Settings(dict):
+    """The fake's settings: the job's dict as given (the worker parses it with this)."""
+
+    @classmethod
+    def from_dict(cls, d):
+        return cls(d or {})
+
+
+def parse_domain(doc):
+    return dict(doc)
 
 
 def _settings(settings):
@@ -65,8 +77,8 @@ class CandidateChunk:
             return cls(frames=z["frames"], values=z["values"])
 
 
-def prepare(reference_path, video_path, settings=None, *, mapping=None, units_to_m=None,
-            on_progress=None):  # fmt: skip
+def prepare(reference_path, video_path, settings=None, *, domain=None, mapping=None,
+            units_to_m=None, on_progress=None):  # fmt: skip
     s = _settings(settings)
     CALLS.append(("prepare", str(video_path)))
     if s.get("fake_fail") == "invalid":

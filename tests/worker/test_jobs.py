@@ -11,7 +11,7 @@ import pytest
 from engine.errors import InvalidInput, RegistrationFailed
 from tests.worker import fake_pipeline
 from worker import jobs, metrics
-from worker.contract import AnalysisJob
+from worker.contract import AnalysisFolder, AnalysisJob
 
 
 @pytest.fixture
@@ -37,7 +37,7 @@ def _no_tmp_files(work_dir: str) -> bool:
 def test_run_all_writes_result_status_and_stage_outputs(job):
     published = []
     path = jobs.run_all(job, 3, pipeline=fake_pipeline, publish=published.append)
-    paths = jobs.Paths(job.work_dir)
+    paths = AnalysisFolder(job.work_dir)
     result = json.loads(path.read_text())
     assert [f["t"] for f in result["frames"]] == list(range(10))
     assert result["analysis_id"] == "a1"
@@ -52,19 +52,19 @@ def test_run_all_writes_result_status_and_stage_outputs(job):
 
 def test_finished_stages_are_skipped(job):
     jobs.run_all(job, 2, pipeline=fake_pipeline)
-    first = jobs.Paths(job.work_dir).result.read_text()
+    first = AnalysisFolder(job.work_dir).result.read_text()
     fake_pipeline.CALLS.clear()
     # A redelivered select after a crash between writing result.json and acking.
     jobs.run_select(job, 2, pipeline=fake_pipeline)
     jobs.run_prepare(job, pipeline=fake_pipeline)
     jobs.run_candidates(job, 1, 2, pipeline=fake_pipeline)
     assert fake_pipeline.CALLS == []
-    assert jobs.Paths(job.work_dir).result.read_text() == first
+    assert AnalysisFolder(job.work_dir).result.read_text() == first
 
 
 def test_resume_runs_only_missing_stages(job):
     jobs.run_all(job, 3, pipeline=fake_pipeline)
-    paths = jobs.Paths(job.work_dir)
+    paths = AnalysisFolder(job.work_dir)
     first = json.loads(paths.result.read_text())
     paths.result.unlink()
     paths.chunk(1, 3).unlink()
@@ -104,7 +104,7 @@ def test_engine_error_is_recorded_with_its_message(job):
     status = jobs.read_status(job.work_dir)
     assert status["state"] == "failed"
     assert status["error"] == "video video.mp4 has no frames"
-    assert not jobs.Paths(job.work_dir).result.exists()
+    assert not AnalysisFolder(job.work_dir).result.exists()
 
 
 def test_registration_failed_in_select_is_recorded(job):
@@ -133,7 +133,7 @@ def test_cancel_marker_stops_at_next_progress_step(job):
     with pytest.raises(jobs.Cancelled):
         jobs.run_all(job, 2, pipeline=fake_pipeline, publish=publish)
     assert jobs.read_status(job.work_dir)["state"] == "cancelled"
-    assert not jobs.Paths(job.work_dir).prepared.exists()
+    assert not AnalysisFolder(job.work_dir).prepared.exists()
     # A later delivery of any task sees the marker and does nothing.
     fake_pipeline.CALLS.clear()
     assert not jobs.start(job)

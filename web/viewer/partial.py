@@ -1,11 +1,11 @@
 """The 3D view of an analysis that is still running: what the finished stages already know.
 
-Stage 2 (``stages/prepare.npz``) gives the aligned reference B_C(t') turned by T_t' about the
-hip; each stage-3 chunk (``stages/candidates-<i>-of-<n>.npz``) gives candidate postures for its
-frames, of which the one with the lowest d_S (the image evidence stage 4 starts from) is drawn
-in grey. Stage 4 (``result.json``) replaces the whole thing with the coloured scene of
-:func:`web.viewer.scene.build_scene`; :class:`web.live.LiveViewers` does that swap on the same
-server, so an open iframe keeps its connection.
+Stage 2 (prepare's output) gives the aligned reference B_C(t') turned by T_t' about the
+hip; each stage-3 chunk gives candidate postures for its frames, of which the one with the
+lowest d_S (the image evidence stage 4 starts from) is drawn in grey. Stage 4 (the result)
+replaces the whole thing with the coloured scene of :func:`web.viewer.scene.build_scene`;
+:class:`web.live.LiveViewers` does that swap on the same server, so an open iframe keeps its
+connection.
 
 The worker writes every file under a temporary name and renames it into place, so a file that
 exists is complete; one that cannot be read yet (or any more) is simply tried again later.
@@ -30,6 +30,7 @@ from web.viewer.scene import (
     _segments_of,
     frame_points,
 )
+from worker.contract import AnalysisFolder
 
 #: Playback rate of the partial scene's loop over the video frames (frames per second).
 PARTIAL_FPS = 6.0
@@ -84,24 +85,23 @@ class FolderState:
 
 def refresh(state: FolderState, work_dir: str | Path) -> bool:
     """Read what is new in the analysis folder into ``state``; True if anything changed."""
-    from engine.pipeline import CandidateChunk, Prepared
+    from engine.stage_outputs import CandidateChunk, Prepared
 
-    work = Path(work_dir)
-    stages = work / "stages"
+    folder = AnalysisFolder(work_dir)
     changed = False
-    if state.aligned is None and (stages / "prepare.npz").is_file():
+    if state.aligned is None and folder.prepared.is_file():
         try:
-            p = Prepared.load(stages / "prepare.npz")
+            p = Prepared.load(folder.prepared)
         except Exception:  # unreadable now: try again on the next poll
             return False
         state.aligned = p.initial_postures(range(p.n_frames))[:, 0]
         state.best = np.full_like(state.aligned, np.nan)
         state.reference_joints = np.asarray(p.reference_joints, float)
-        state.fps = float(p.video.get("fps") or 30.0)
+        state.fps = float(p.video.fps or 30.0)
         changed = True
-    if state.aligned is not None and stages.is_dir():
-        for path in sorted(stages.glob("candidates-*-of-*.npz")):
-            if path.name in state.chunks_seen or ".tmp" in path.name:
+    if state.aligned is not None:
+        for path in folder.finished_chunks():
+            if path.name in state.chunks_seen:
                 continue
             try:
                 chunk = CandidateChunk.load(path)
@@ -112,9 +112,9 @@ def refresh(state: FolderState, work_dir: str | Path) -> bool:
                 if len(cands) and 0 <= int(t) < len(state.best):
                     state.best[int(t)] = cands[int(np.argmin(d_s))] if len(d_s) else cands[0]
             changed = True
-    if state.result is None and (work / "result.json").is_file():
+    if state.result is None and folder.result.is_file():
         try:
-            state.result = json.loads((work / "result.json").read_text())
+            state.result = json.loads(folder.result.read_text())
             changed = True
         except (OSError, ValueError):
             pass

@@ -3,14 +3,14 @@
 Until now the domain's ``segments`` were kept out of ``<ref>.domain.json`` (the engine never
 saw them) and ``derived.segments`` held them as given, or nothing when the engine detected the
 boundaries. Each reference is re-inspected: ``derived.segments`` becomes the starts every
-analysis uses, then the last frame, and the domain file is rewritten with the coach's starts.
-A reference whose BVH is gone is left as it was.
+analysis uses, then the last frame. A reference whose BVH is gone is left as it was. (It also
+rewrote the domain file beside the BVH; since 0005 no domain file is read, analyses carry the
+stored ``domain_config``, so that step is gone.)
 
 Revision ID: 0004
 Revises: 0003
 """
 
-import json
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -26,7 +26,6 @@ REFERENCES = sa.table(
     "references",
     sa.column("id", sa.Integer),
     sa.column("bvh_path", sa.String),
-    sa.column("domain_path", sa.String),
     sa.column("domain_config", sa.JSON),
     sa.column("derived", sa.JSON),
 )
@@ -48,16 +47,12 @@ def _derived(bvh: Path, config: dict | None) -> dict | None:
 
 
 def upgrade() -> None:
-    from app.core.validation import engine_domain
-
     conn = op.get_bind()
     for row in conn.execute(sa.select(REFERENCES)).all():
         derived = _derived(Path(row.bvh_path), row.domain_config)
         if derived is None:
             continue
         conn.execute(REFERENCES.update().where(REFERENCES.c.id == row.id).values(derived=derived))
-        if row.domain_path and row.domain_config and Path(row.domain_path).parent.exists():
-            Path(row.domain_path).write_text(json.dumps(engine_domain(row.domain_config)))
 
 
 def downgrade() -> None:

@@ -98,7 +98,6 @@ def test_file_errors(tmp_path):
 def test_the_coach_sets_the_segments_or_they_are_detected(tmp_path, cmu_bvh):
     """Every analysis takes its reference segments from here (engine.pipeline)."""
     from engine.io.bvh import load_reference
-    from engine.pipeline import _reference_segments
     from engine.reference.boundaries import reference_boundaries
 
     bvh = tmp_path / "swing.bvh"
@@ -114,7 +113,7 @@ def test_the_coach_sets_the_segments_or_they_are_detected(tmp_path, cmu_bvh):
     assert reference_segments(motion, parse_domain({"segment_names": ["x"]})).names[0] == ""
     doc = {"segments": [1, 100, 300], "segment_names": ["a", "b", "c"]}
     domain_path(bvh).write_text(json.dumps(doc))
-    own = _reference_segments(load_reference(bvh), bvh)
+    own = reference_segments(load_reference(bvh).motion, find_domain(bvh))
     assert own.starts == (1, 100, 300) and own.end == motion.frames - 1
     assert own.names == ("a", "b", "c")
     with pytest.raises(InvalidInput, match="domain segments"):

@@ -151,12 +151,12 @@ P2 = BENCH_CASES / "P2_take_64_30_vs_64_29"
 def p2_stages():
     from engine.io.bvh import load_reference
     from engine.io.video import read_video
-    from engine.stages import run_stages_0_2_full
+    from engine.pipeline import run_stages_0_2
 
     if not P2.exists():
         pytest.skip("public cases not beside the clone")
     ref = load_reference(P2 / "reference.bvh")
-    return ref, run_stages_0_2_full(ref, read_video(P2 / "video.mp4"))
+    return ref, run_stages_0_2(ref, read_video(P2 / "video.mp4"))
 
 
 def test_the_whole_video_tells_front_from_back(p2_stages):

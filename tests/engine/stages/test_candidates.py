@@ -162,7 +162,11 @@ def test_bp_prior_keeps_the_estimate_near_the_reference_under_model_mismatch() -
     err = {}
     for mu in (0.0, 2.0):
         s = CandidateSettings(
-            n_samples=16, n_iterations=4, refine_sweeps=4, n_candidates=4, bp_prior_weight=mu,
+            n_samples=16,
+            n_iterations=4,
+            refine_sweeps=4,
+            n_candidates=4,
+            bp_prior_weight=mu,
             estimator="bp",
         )
         fc = estimate_candidates(
@@ -179,7 +183,7 @@ def test_estimator_must_be_known():
 
 @pytest.mark.parametrize(
     "bad",
-    [{"escape_dirs": -1}, {"escape_lookahead": -2}, {"occluded_tolerance": -0.1},
+    [{"escape_dirs": -1}, {"restart_ds": -0.01}, {"occluded_tolerance": -0.1},
      {"occluded_tolerance": float("nan")}, {"restarts": -1}, {"restart_ds": float("nan")},
      {"restart_deg": -1.0}, {"subpixel_rows": -1}, {"escape_prefilter": -1},
      {"alternatives": -1}, {"alternative_share": 0.0}, {"alternative_share": 1.5},
@@ -230,7 +234,7 @@ def test_chunk_needs_one_generator_or_one_per_frame() -> None:
 
 def _arm_posture(l_upper: np.ndarray, l_lower: np.ndarray) -> np.ndarray:
     """The default body, right arm a little down, left arm bones along the given directions."""
-    from engine.stages.candidates import _turn_to
+    from engine.stages.candidates.postures import _turn_to
 
     def towards(d: list[float]) -> np.ndarray:
         d = np.asarray(d, float)
@@ -309,7 +313,9 @@ def test_subpixel_rows_score_candidates_with_the_continuous_d_A(flipped) -> None
 
 def test_occluded_part_takes_the_reference_pose_where_the_image_allows() -> None:
     from engine.render.capsules import Target
-    from engine.stages.candidates import _frame_offsets, _reset_occluded, _Scorer
+    from engine.stages.candidates.occlusion import _reset_occluded
+    from engine.stages.candidates.postures import _frame_offsets
+    from engine.stages.candidates.scorer import _Scorer
 
     # left forearm across the back, hidden by the chest
     truth = _arm_posture([-0.5, -1.0, -0.6], [-1.0, 0.0, -2.0])
@@ -340,7 +346,7 @@ def test_a_lifted_foot_the_prior_keeps_down_is_flagged_as_misfit() -> None:
     BP finds it, the in-plane estimate (what selection reports while the prior wins) keeps
     the foot on the floor, and the default misfit margin flags the frame.
     """
-    from engine.pipeline import flag_image_misfit
+    from engine.stages.assessment import flag_image_misfit
     from engine.stages.selection import Selection, SelectionSettings
     from engine.types import Segments
 
@@ -380,7 +386,8 @@ def test_a_lifted_foot_the_prior_keeps_down_is_flagged_as_misfit() -> None:
 
 
 def test_alternative_local_optima_join_the_candidates() -> None:
-    from engine.stages.candidates import _alternatives, _with_alternatives, generate_candidates
+    from engine.stages.candidates import generate_candidates
+    from engine.stages.candidates.alternatives import _alternatives, _with_alternatives
 
     truth = _posture(-30.0)
     cam = _camera(truth)
@@ -407,7 +414,8 @@ def test_alternative_local_optima_join_the_candidates() -> None:
 
 def test_refine_with_a_step_per_part_stops_converged_parts() -> None:
     from engine.render.capsules import Target
-    from engine.stages.candidates import _refine, _Scorer
+    from engine.stages.candidates.refinement import _refine
+    from engine.stages.candidates.scorer import _Scorer
 
     truth = _posture(-30.0)
     cam = _camera(truth)
