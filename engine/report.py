@@ -12,13 +12,14 @@ from __future__ import annotations
 import base64
 import html
 import io
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import cv2
 import numpy as np
 
 from engine.body.skeleton import BONE_CHILD, BONE_NAMES, BONE_PARENT
+from engine.io.result_reader import Result, as_result
 
 #: Error (deg) at which a bone is fully red in the overlays and the 3D view.
 ERROR_RED_DEG = 45.0
@@ -119,43 +120,46 @@ def _dashed_line(
                  color, thick, cv2.LINE_AA)  # fmt: skip
 
 
-def _strip_frames(result: dict[str, Any], n: int) -> list[int]:
-    """Indices into result["frames"]: segment starts, worst frames, then evenly spaced."""
-    t_to_i = {f["t"]: i for i, f in enumerate(result["frames"])}
+def _strip_frames(result: Result, n: int) -> list[int]:
+    """Indices into result.frames: segment starts, worst frames, then evenly spaced."""
+    t_to_i = result.frame_index
     picks: list[int] = []
-    for s in result["segments"]:
-        for t in (s["performer_start"], s.get("worst_frame")):
-            if t in t_to_i and t_to_i[t] not in picks:
-                picks.append(t_to_i[t])
-    even = np.linspace(0, len(result["frames"]) - 1, n).round().astype(int)
+    for s in result.segments:
+        for t in (s.performer_start, s.worst_frame):
+            i = t_to_i.get(t) if t is not None else None
+            if i is not None and i not in picks:
+                picks.append(i)
+    even = np.linspace(0, len(result.frames) - 1, n).round().astype(int)
     picks += [int(i) for i in even if int(i) not in picks]
     return sorted(picks[:n])
 
 
-def _error_plot_png(result: dict[str, Any]) -> str:
+def _error_plot_png(result: Result | Mapping[str, Any]) -> str:
     import matplotlib
 
     matplotlib.use("Agg", force=False)
     from matplotlib.figure import Figure
 
-    t = np.array([f["t"] for f in result["frames"]])
-    eps = np.array([f["posture_error_deg"] for f in result["frames"]])
+    result = as_result(result)
+    t = result.t
+    eps = result.posture_error_deg
     fig = Figure(figsize=(8, 2.6), dpi=100)
     ax = fig.add_subplot()
-    for j, s in enumerate(result["segments"]):
-        ax.axvspan(s["performer_start"], s["performer_end"], color=f"C{j % 10}", alpha=0.12, lw=0)
-        mid = (s["performer_start"] + s["performer_end"]) / 2
-        ax.text(mid, 1.0, s.get("name", str(j + 1)), transform=ax.get_xaxis_transform(),
+    for j, s in enumerate(result.segments):
+        ax.axvspan(s.performer_start, s.performer_end, color=f"C{j % 10}", alpha=0.12, lw=0)
+        mid = (s.performer_start + s.performer_end) / 2
+        label = str(j + 1) if s.name is None else s.name
+        ax.text(mid, 1.0, label, transform=ax.get_xaxis_transform(),
                 ha="center", va="bottom", fontsize=8)  # fmt: skip
-    misfit = [i for i, f in enumerate(result["frames"]) if "image_misfit" in f.get("flags", ())]
+    misfit = [i for i, f in enumerate(result.frames) if "image_misfit" in f.flags]
     for k, i in enumerate(misfit):  # frames the video does not confirm: errors may be too small
         ax.axvspan(t[i] - 0.5, t[i] + 0.5, color=np.divide(MISFIT_RGB, 255), alpha=0.35, lw=0,
                    label="video disagrees (image_misfit)" if k == 0 else None)  # fmt: skip
     ax.plot(t, eps, color="k", lw=1.2, label="posture error eps_t'")
-    if "score_deg" in result["frames"][0]:
+    if result.score_deg is not None:
         ax.plot(
             t,
-            [f["score_deg"] for f in result["frames"]],
+            result.score_deg,
             color="C3",
             lw=1,
             ls="--",
@@ -173,7 +177,7 @@ def _error_plot_png(result: dict[str, Any]) -> str:
 
 
 def build_report_html(
-    result: dict[str, Any],
+    result: Result | Mapping[str, Any],
     video_frames: np.ndarray | Sequence[np.ndarray] | None = None,
     *,
     strip_frames: int = 8,
@@ -182,10 +186,10 @@ def build_report_html(
 
     Parameters
     ----------
-    result : dict
-        A result document (:func:`engine.io.result.build_result`).
+    result : Result or dict
+        A result, or its document (:func:`engine.io.result.build_result`).
     video_frames : ndarray of uint8, shape (T, H, W, 3), or sequence of (H, W, 3), optional
-        RGB frames indexed like ``result["frames"]``; without them the strip shows the
+        RGB frames indexed like ``result.frames``; without them the strip shows the
         skeletons on a grey background.
     strip_frames : int
         Frames in the contact strip.
@@ -194,10 +198,16 @@ def build_report_html(
     -------
     str
         A complete HTML document with every image inline.
+
+    Raises
+    ------
+    InvalidInput
+        ``result`` is not a result document.
     """
     e = html.escape
-    frames = result["frames"]
-    w, h = int(result["video"]["width"]), int(result["video"]["height"])
+    result = as_result(result)
+    frames = result.frames
+    w, h = result.video.width, result.video.height
     strip = []
     for i in _strip_frames(result, strip_frames):
         f = frames[i]
@@ -206,33 +216,31 @@ def build_report_html(
             if video_frames is not None and i < len(video_frames)
             else np.full((h, w, 3), 60, np.uint8)
         )
-        drawn = draw_skeleton(
-            img, np.asarray(f["joints_2d"]), np.asarray(f["bone_errors_deg"]),
-            f.get("image_best_joints_2d"),
-        )  # fmt: skip
-        cap = f"t'={f['t']} &rarr; t={f['reference_frame']}, {f['posture_error_deg']:.1f}&deg;"
+        drawn = draw_skeleton(img, f.joints_2d, f.bone_errors_deg, f.image_best_joints_2d)
+        cap = f"t'={f.t} &rarr; t={f.reference_frame}, {f.posture_error_deg:.1f}&deg;"
         strip.append(
-            f'<figure><img alt="frame {f["t"]}" src="data:image/png;base64,{_png_b64(drawn)}">'
+            f'<figure><img alt="frame {f.t}" src="data:image/png;base64,{_png_b64(drawn)}">'
             f"<figcaption>{cap}</figcaption></figure>"
         )
     rows = []
-    for j, s in enumerate(result["segments"]):
+    for j, s in enumerate(result.segments):
         worst = ", ".join(
-            f"{e(BONE_NAMES[b])} ({s['bone_mean_errors_deg'][b]:.0f}&deg;)"
-            for b in np.argsort(-np.asarray(s["bone_mean_errors_deg"]))[:3]
+            f"{e(BONE_NAMES[b])} ({s.bone_mean_errors_deg[b]:.0f}&deg;)"
+            for b in np.argsort(-s.bone_mean_errors_deg)[:3]
         )
-        status = s.get("status", "ok")
-        score = f"{s['score_deg']:.1f}" if "score_deg" in s else "&ndash;"
+        status = s.status or "ok"
+        score = "&ndash;" if s.score_deg is None else f"{s.score_deg:.1f}"
+        tempo = float("nan") if s.tempo is None else s.tempo
         rows.append(
-            f"<tr class='{e(status)}'><td>{e(s.get('name', str(j + 1)))}</td>"
-            f"<td>{s['reference_start']}&ndash;{s['reference_end']}</td>"
-            f"<td>{s['performer_start']}&ndash;{s['performer_end']}</td>"
-            f"<td>{s.get('tempo', float('nan')):.2f}</td><td>{s['mean_error_deg']:.1f}</td>"
+            f"<tr class='{e(status)}'><td>{e(str(j + 1) if s.name is None else s.name)}</td>"
+            f"<td>{s.reference_start}&ndash;{s.reference_end}</td>"
+            f"<td>{s.performer_start}&ndash;{s.performer_end}</td>"
+            f"<td>{tempo:.2f}</td><td>{s.mean_error_deg:.1f}</td>"
             f"<td>{score}</td><td>{e(status)}</td><td>{worst}</td></tr>"
         )
-    summary = result.get("summary", {})
-    messages = "".join(f"<p class='msg'>{e(m)}</p>" for m in summary.get("messages", []))
-    timing = ", ".join(f"{e(k)} {v:.2f} s" for k, v in result.get("timing_s", {}).items())
+    summary = result.summary
+    messages = "".join(f"<p class='msg'>{e(m)}</p>" for m in summary.messages)
+    timing = ", ".join(f"{e(k)} {v:.2f} s" for k, v in result.timing_s.items())
     legend = "".join(
         f"<span style='background:rgb{tuple(int(c * 255) for c in rgb)}'>{d:.0f}&deg;</span>"
         for d, rgb in zip(
@@ -241,19 +249,19 @@ def build_report_html(
             strict=True,
         )
     )
-    mean_deg = summary.get(
-        "mean_error_deg", float(np.mean([f["posture_error_deg"] for f in frames]))
-    )
+    mean_deg = summary.mean_error_deg
+    if mean_deg is None:
+        mean_deg = float(np.mean(result.posture_error_deg))
     head = (
-        f"{len(frames)} video frames at {result['video']['fps']:g} fps against "
-        f"{result['reference']['frames']} reference frames at {result['reference']['fps']:g} fps. "
+        f"{len(frames)} video frames at {result.video.fps:g} fps against "
+        f"{result.reference.frames} reference frames at {result.reference.fps:g} fps. "
         f"Mean posture error {mean_deg:.1f}&deg;."
     )
     columns = "".join(
         f"<th>{c}</th>" for c in ("segment", "reference", "performer", "tempo",
                                   "mean error (&deg;)", "score (&deg;)", "status", "worst bones")
     )  # fmt: skip
-    title = f"Motion analysis: {e(result['reference']['name'])}"
+    title = f"Motion analysis: {e(result.reference.name)}"
     return f"""<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><title>{title}</title>
 <style>

@@ -35,7 +35,7 @@ def run(args: argparse.Namespace) -> int:
     import viser
 
     from engine.io.bvh import load_reference
-    from engine.io.result import read_result
+    from engine.io.result_reader import read_result
     from web.viewer.scene import build_scene, record_scene
 
     result = read_result(args.result)

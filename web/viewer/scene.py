@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -18,6 +19,7 @@ import numpy as np
 import viser
 
 from engine.body.skeleton import BONE_CHILD, BONE_PARENT
+from engine.io.result_reader import Result, ResultFrame, ResultSegment, as_result
 from engine.report import ERROR_RED_DEG, MISFIT_RGB, error_colors
 
 #: What an unsure bone fades to (see :func:`bone_colours`).
@@ -54,14 +56,20 @@ def _rgb_pairs(rgb01: np.ndarray) -> np.ndarray:
     return np.repeat(c[:, None], 2, 1)
 
 
-def bone_colours(frame: dict[str, Any]) -> np.ndarray:
+def bone_colours(frame: ResultFrame | Mapping[str, Any]) -> np.ndarray:
     """Per-bone colours (16, 3) in [0, 1] of a result frame: the error's colour, washed out
     towards grey as the bone's range over the candidates the video cannot tell apart
     (``bone_error_range_deg``) widens, fully at ``ERROR_RED_DEG`` (x 0.7): a bright red bone
-    is a sure fault, a pale one a guess about depth."""
-    rgb = error_colors(np.asarray(frame["bone_errors_deg"], float))
-    rng = frame.get("bone_error_range_deg")
-    if not rng:
+    is a sure fault, a pale one a guess about depth.
+
+    ``frame`` is a :class:`~engine.io.result_reader.ResultFrame` or a mapping with
+    ``bone_errors_deg`` and, optionally, ``bone_error_range_deg``."""
+    if isinstance(frame, ResultFrame):
+        errors, rng = frame.bone_errors_deg, frame.bone_error_range_deg
+    else:
+        errors, rng = frame["bone_errors_deg"], frame.get("bone_error_range_deg")
+    rgb = error_colors(np.asarray(errors, float))
+    if rng is None or not len(rng):
         return rgb
     width = np.ptp(np.asarray(rng, float), axis=1)
     k = 0.7 * np.clip(width / ERROR_RED_DEG, 0.0, 1.0)[:, None]
@@ -74,17 +82,17 @@ class ViewerScene:
 
     Attributes
     ----------
-    frames : list of dict
-        ``result["frames"]``.
+    frames : tuple of ResultFrame
+        ``result.frames``.
     reference_joints : ndarray, shape (T, 17, 3)
         The BVH as given (frame numbers of the result index it directly).
     """
 
     server: viser.ViserServer
     reference_joints: np.ndarray
-    frames: list[dict[str, Any]]
+    frames: tuple[ResultFrame, ...]
     fps: float
-    segments: list[dict[str, Any]] = field(default_factory=list)
+    segments: tuple[ResultSegment, ...] = ()
     handles: dict[str, Any] = field(default_factory=dict)
     current: int = 0
     _stop: threading.Event = field(default_factory=threading.Event)
@@ -94,13 +102,11 @@ class ViewerScene:
         """(reference (17, 3), selected (17, 3), other candidates (K-1, 17, 3)) of frame i,
         the reference translated so its hip sits on the performer's."""
         f = self.frames[i]
-        sel = np.asarray(f["joints_3d"], float)
-        ref = self.reference_joints[int(f["reference_frame"])]
+        sel = f.joints_3d
+        ref = self.reference_joints[f.reference_frame]
         ref = ref - ref[0] + sel[0]
-        cands = np.asarray(f.get("candidates") or [f["joints_3d"]], float)
-        others = (
-            np.delete(cands, int(f.get("selected", 0)), axis=0) if len(cands) > 1 else cands[:0]
-        )
+        cands = f.candidates if len(f.candidates) else sel[None]
+        others = np.delete(cands, f.selected, axis=0) if len(cands) > 1 else cands[:0]
         return ref, sel, others
 
     def set_frame(self, i: int) -> None:
@@ -118,13 +124,13 @@ class ViewerScene:
                 h["candidates"].points = _segments_of(others).reshape(-1, 2, 3).astype(np.float32)
             else:
                 h["candidates"].points = _hidden_at(sel[0])
-            best = f.get("image_best")
-            if best is not None and 0 <= int(best) < len(f.get("candidates") or []):
-                pts = _segments_of(np.asarray(f["candidates"][int(best)], float))
+            best = f.image_best
+            if best is not None and 0 <= best < len(f.candidates):
+                pts = _segments_of(f.candidates[best])
             else:  # the video agrees with the reported posture: nothing to show
                 pts = _hidden_at(sel[0])
             h["image_best"].points = pts.astype(np.float32)
-            label = f"t'={f['t']}  t={f['reference_frame']}  eps={f['posture_error_deg']:.1f} deg"
+            label = f"t'={f.t}  t={f.reference_frame}  eps={f.posture_error_deg:.1f} deg"
             h["label"].text = label
             top = sel[16] + LABEL_LIFT  # above the performer's head, or the expert's if higher
             top[1] = max(sel[16, 1], ref[16, 1]) + LABEL_LIFT[1]
@@ -194,7 +200,7 @@ def _legend_html() -> str:
 def build_scene(
     server: viser.ViserServer,
     reference_joints: np.ndarray,
-    result: dict[str, Any],
+    result: Result | Mapping[str, Any],
     *,
     gui: bool = True,
 ) -> ViewerScene:
@@ -205,8 +211,8 @@ def build_scene(
     server : viser.ViserServer
     reference_joints : ndarray, shape (T, 17, 3)
         Reference joints, world frame, frames counted as in the BVH file.
-    result : dict
-        A result document (DESIGN.md).
+    result : Result or dict
+        A result, or its document (DESIGN.md).
     gui : bool
         Add the GUI (slider, play, candidates toggle, legend, segments).
 
@@ -216,11 +222,10 @@ def build_scene(
         Showing the first frame.
     """
     ref = np.asarray(reference_joints, float)
-    frames = list(result["frames"])
-    if not frames:
+    result = as_result(result)
+    if not result.frames:
         raise ValueError("result: no frames to show")
-    fps = float(result.get("video", {}).get("fps", 30.0))
-    scene = ViewerScene(server, ref, frames, fps, list(result.get("segments", [])))
+    scene = ViewerScene(server, ref, result.frames, result.video.fps, result.segments)
     server.scene.set_up_direction("+y")
     look_at, position, floor = frame_body(scene)
     server.scene.add_grid(
@@ -269,13 +274,13 @@ def _add_gui(scene: ViewerScene) -> None:
     def _(_event: Any) -> None:
         h["candidates"].visible = bool(show.value)
 
-    t_to_i = {int(f["t"]): i for i, f in enumerate(scene.frames)}
+    t_to_i = {f.t: i for i, f in enumerate(scene.frames)}
     with server.gui.add_folder("segments"):
         for j, s in enumerate(scene.segments):
-            worst = t_to_i.get(int(s.get("worst_frame", s["performer_start"])), 0)
-            label = f"{s.get('name') or j + 1}: {s['mean_error_deg']:.1f} deg"
-            if s.get("status", "ok") != "ok":
-                label += f" ({s['status']})"
+            worst = t_to_i.get(s.performer_start if s.worst_frame is None else s.worst_frame, 0)
+            label = f"{s.name or j + 1}: {s.mean_error_deg:.1f} deg"
+            if (s.status or "ok") != "ok":
+                label += f" ({s.status})"
             button = server.gui.add_button(label)
             button.on_click(lambda _e, i=worst: scene.set_frame(i))
             h[f"segment_{j}"] = button

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from engine.errors import InvalidInput
-from engine.io.result import build_result, read_result, validate_result, write_result
+from engine.io.result import build_result, read_result_doc, validate_result, write_result
 from engine.reference.domain import parse_domain
 from engine.render.camera import Camera
 from engine.stages.selection import select_and_refine
@@ -55,7 +55,7 @@ def test_built_result_is_valid_and_round_trips(result_doc, tmp_path):
     assert result_doc["timing_s"]["total"] == pytest.approx(0.01)
     assert result_doc["summary"]["status"] == "ok"
     path = write_result(result_doc, tmp_path / "out" / "result.json")
-    assert read_result(path) == json.loads(json.dumps(result_doc))
+    assert read_result_doc(path) == json.loads(json.dumps(result_doc))
     assert not list(path.parent.glob("*.tmp"))
 
 
@@ -83,10 +83,10 @@ def test_invalid_results_fail(result_doc, mutate, match):
 
 def test_read_result_errors(tmp_path):
     with pytest.raises(InvalidInput, match="does not exist"):
-        read_result(tmp_path / "nope.json")
+        read_result_doc(tmp_path / "nope.json")
     (tmp_path / "bad.json").write_text("[")
     with pytest.raises(InvalidInput, match="not valid JSON"):
-        read_result(tmp_path / "bad.json")
+        read_result_doc(tmp_path / "bad.json")
 
 
 def test_candidate_count_must_match(result_doc, rng):
@@ -126,7 +126,7 @@ def test_report_plot_shades_the_frames_the_video_does_not_confirm(result_doc):
 
 
 def test_misfit_frames_carry_the_candidate_the_video_fits_best(result_doc):
-    from engine.pipeline import add_image_best
+    from engine.stages.assessment import add_image_best
 
     doc = copy.deepcopy(result_doc)
     for f in doc["frames"]:
