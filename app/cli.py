@@ -1,14 +1,19 @@
-"""The `coach` command: engine subcommands plus the service's `serve` and `worker`.
+"""The `coach` command: engine subcommands plus those the packages declare.
 
-Service modules are imported only when their command runs, so the engine commands work on
-an install without the api/worker extras.
+``serve``, ``worker`` (app) and ``view`` (web) come from the ``coach.commands`` entry points
+in pyproject.toml, so this module imports no package above the engine by name, and a package
+whose extra is not installed simply adds no command.
 """
 
 from __future__ import annotations
 
 import argparse
+from importlib.metadata import entry_points
 
 from engine.cli import add_engine_commands, run_parsed
+
+#: Entry-point group of ``register(subparsers)`` functions that add subcommands.
+COMMANDS = "coach.commands"
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -17,18 +22,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", required=True)
     add_engine_commands(sub)
-    try:
-        from app import commands as service_commands
-    except ImportError:  # the api extra is not installed: engine commands only
-        service_commands = None
-    if service_commands is not None:
-        service_commands.register(sub)
-    try:
-        from web import commands as web_commands
-    except ImportError:  # the viewer extra is not installed
-        web_commands = None
-    if web_commands is not None:
-        web_commands.register(sub)
+    for ep in sorted(entry_points(group=COMMANDS), key=lambda e: e.name):
+        try:
+            register = ep.load()
+        except ImportError:  # that package's extra is not installed
+            continue
+        register(sub)
     return parser
 
 

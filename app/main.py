@@ -7,10 +7,10 @@ reflector (worker progress -> database -> webhooks) for its lifetime.
 
 from __future__ import annotations
 
-import importlib
 import logging
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
+from importlib.metadata import entry_points
 
 from fastapi import FastAPI
 from fastapi.middleware.cors import CORSMiddleware
@@ -50,9 +50,6 @@ class BodyLimitMiddleware:
             f"{API_PREFIX}/analyses": settings.max_video_bytes + extra,
             f"{API_PREFIX}/references": settings.max_bvh_bytes + settings.max_domain_bytes + extra,
         }
-        # The browser pages' uploads (web.routes) carry the same files.
-        self.limits["/web/api/analyses"] = self.limits[f"{API_PREFIX}/analyses"]
-        self.limits["/web/api/references"] = self.limits[f"{API_PREFIX}/references"]
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http" or scope["method"] in ("GET", "HEAD", "OPTIONS"):
@@ -160,7 +157,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     errors.install(app)
     app.include_router(api_router, prefix=API_PREFIX)
-    _mount_web(app)
+    _mount_declared(app)
 
     # Outermost last: body limits run first, then CORS (closed unless origins are set).
     app.add_middleware(
@@ -174,7 +171,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(
         CORSMiddleware,
         allow_origins=settings.cors_origins,
-        allow_methods=["GET", "POST", "PATCH", "DELETE"],
+        allow_methods=["GET", "POST", "PUT", "PATCH", "DELETE"],
         allow_headers=["X-API-Key", "Content-Type", "Idempotency-Key"],
         allow_credentials=False,
     )
@@ -183,14 +180,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     return app
 
 
-def _mount_web(app: FastAPI) -> None:
-    """Browser pages, when the web package provides ``web.routes.register(app)``."""
-    try:
-        module = importlib.import_module("web.routes")
-    except ModuleNotFoundError as exc:
-        if exc.name in ("web", "web.routes"):
-            return
-        raise
-    register = getattr(module, "register", None)
-    if callable(register):
-        register(app)
+#: Entry-point group of the packages that add routes to the app (pyproject.toml declares the
+#: web pages' ``web.routes:register``); the app itself imports none of them.
+MOUNTS = "coach.mounts"
+
+
+def _mount_declared(app: FastAPI) -> None:
+    """Call every declared ``register(app)`` (``coach.mounts``), in name order."""
+    for ep in sorted(entry_points(group=MOUNTS), key=lambda e: e.name):
+        ep.load()(app)

@@ -6,9 +6,9 @@ Every string has a length limit and every list a size limit: nothing unbounded c
 from __future__ import annotations
 
 from datetime import datetime
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import AnyHttpUrl, BaseModel, ConfigDict, Field, field_validator
+from pydantic import AnyHttpUrl, BaseModel, ConfigDict, Field, field_validator, model_validator
 
 # A plausibility check only (no DNS, no email-validator dependency).
 EMAIL_PATTERN = r"^[^@\s]+@[^@\s]+\.[^@\s]+$"
@@ -112,11 +112,49 @@ class LoginRequest(BaseModel):
 
 # ---- references
 class ReferencePublic(_Orm):
+    """A reference as stored, plus what pages show of it (derived from the stored fields)."""
+
     id: int
     name: str
     domain_config: dict[str, Any] | None
     derived: dict[str, Any]
     created_at: datetime
+    frames: int | None = None
+    fps: float | None = None
+    duration_s: float | None = None
+    #: One name per segment ("segment i" where the coach named none); empty when none named
+    #: and none derived.
+    segment_names: list[str] = []
+    #: The engine's part of ``domain_config`` (without the BVH import options).
+    domain: dict[str, Any] = {}
+    thumbnail: str = ""
+    strip: str = ""
+    preview: str = ""
+
+    @model_validator(mode="after")
+    def _derive(self) -> ReferencePublic:
+        config, derived = self.domain_config or {}, self.derived or {}
+        self.frames, self.fps = derived.get("frames"), derived.get("fps")
+        self.duration_s = derived.get("duration_s")
+        names = list(config.get("segment_names") or [])
+        n = max(len(derived.get("segments") or []) - 1, 0) or len(names)
+        self.segment_names = [names[i] if i < len(names) else f"segment {i + 1}"
+                              for i in range(n)]  # fmt: skip
+        self.domain = {k: v for k, v in config.items() if k not in ("mapping", "units_to_m")}
+        base = f"/api/v1/references/{self.id}"
+        self.thumbnail, self.strip = f"{base}/thumbnail.svg", f"{base}/strip.svg"
+        self.preview = f"{base}/preview.json"
+        return self
+
+
+class DomainUpdate(BaseModel):
+    """The coach-editable part of a reference's domain (engine.reference.domain)."""
+
+    name: str | None = Field(default=None, min_length=1, max_length=200)
+    segment_names: list[Annotated[str, Field(max_length=100)]] = Field(default=[], max_length=64)
+    bone_weights: dict[str, float] = Field(default={}, max_length=32)
+    tolerances_deg: dict[str, float] = Field(default={}, max_length=32)
+    default_tolerance_deg: float = Field(default=0.0, ge=0, le=180)
 
 
 # ---- analyses
@@ -168,3 +206,45 @@ class SegmentPublic(BaseModel):
 class SegmentsPublic(BaseModel):
     analysis_id: str
     segments: list[SegmentPublic]
+
+
+# ---- comments
+class CommentCreate(BaseModel):
+    body: str = Field(min_length=1, max_length=4000)
+    frame: int | None = Field(default=None, ge=0, le=1_000_000)
+    segment: int | None = Field(default=None, ge=0, le=1000)
+
+
+class CommentPublic(BaseModel):
+    id: int
+    body: str
+    frame: int | None
+    segment: int | None
+    author: str
+    author_id: int | None
+    created_at: str
+
+
+# ---- invites
+class InviteCreate(BaseModel):
+    display_name: str = Field(default="", max_length=200)
+    days: int = Field(default=7, ge=1, le=30)
+
+
+class InvitePublic(BaseModel):
+    url: str
+    path: str
+    display_name: str
+    expires_at: datetime
+
+
+class JoinBody(BaseModel):
+    display_name: str = Field(min_length=1, max_length=200)
+    email: str = Field(min_length=3, max_length=320)
+    password: str = Field(min_length=1, max_length=1000)
+
+
+class JoinedPublic(BaseModel):
+    id: int
+    display_name: str
+    url: str

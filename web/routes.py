@@ -1,4 +1,7 @@
-"""``register(app)``: the browser pages, their JSON endpoints and static files.
+"""``register(app)``: the browser pages, the 3D view's routes and static files.
+
+Every other JSON route the pages call is the API's (``/api/v1``, :mod:`app.api.routes`), which
+accepts the session cookie as well as an API key.
 
 Pages (session-cookie sign-in, ``POST /api/v1/session``):
 
@@ -23,8 +26,10 @@ STATIC_DIR = Path(__file__).resolve().parent / "static"
 
 
 def register(app: FastAPI) -> None:
-    from web.pages import api, html
+    """The web package's mount (declared in pyproject.toml, entry point ``coach.mounts``)."""
+    from web.pages import html
+    from web.viewer import routes as viewer
 
     app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
-    app.include_router(api.router)
+    app.include_router(viewer.router)
     app.include_router(html.router)

@@ -48,16 +48,8 @@ api_key_header = APIKeyHeader(
 )
 
 
-def get_current_key(
-    request: Request,
-    session: SessionDep,
-    key: Annotated[str | None, Security(api_key_header)],
-) -> ApiKey:
-    if not key:
-        raise ApiError(
-            401, "unauthorized", "an X-API-Key header is required",
-            headers={"WWW-Authenticate": "X-API-Key"},
-        )  # fmt: skip
+def _check_key(request: Request, session: Session, key: str) -> ApiKey:
+    """The active API key ``key``, rate limited; 401 or 429 otherwise."""
     row = crud.get_active_api_key(session, key[:200])
     if row is None:
         raise ApiError(
@@ -76,23 +68,90 @@ def get_current_key(
     return row
 
 
-CurrentKey = Annotated[ApiKey, Depends(get_current_key)]
+def _signed_in(request: Request, session: Session) -> User | None:
+    """The browser user signed in through ``POST /api/v1/session`` (signed session cookie)."""
+    user_id = request.session.get("user_id")
+    return crud.get_user(session, int(user_id)) if isinstance(user_id, int) else None
 
 
-def get_current_club(session: SessionDep, key: CurrentKey) -> Club:
-    club = crud.get_club(session, key.club_id)
-    if club is None:  # the key outlived its club (cascade should prevent this)
-        raise ApiError(401, "unauthorized", "the API key's club no longer exists")
-    return club
+@dataclass(frozen=True)
+class Principal:
+    """Who calls: a club's API key (acts as the club's coach), or a signed-in user.
+
+    Every route scopes its queries through this: to ``club`` always, and for a performer to
+    their own rows (:attr:`own_performer_id`).
+    """
+
+    club: Club
+    user: User | None = None
+
+    @property
+    def is_coach(self) -> bool:
+        return self.user is None or self.user.role == "coach"
+
+    @property
+    def own_performer_id(self) -> int | None:
+        """The performer whose rows alone this caller may see (None: the whole club)."""
+        return None if self.is_coach or self.user is None else self.user.id
+
+    def require_coach(self) -> None:
+        if not self.is_coach:
+            raise ApiError(403, "forbidden", "only a coach may do this")
+
+    def require_user(self) -> User:
+        """The signed-in user, for what a person does (comments, invites)."""
+        if self.user is None:
+            raise ApiError(403, "forbidden", "sign in as a person to do this")
+        return self.user
 
 
-CurrentClub = Annotated[Club, Depends(get_current_club)]
+def get_principal(
+    request: Request,
+    session: SessionDep,
+    key: Annotated[str | None, Security(api_key_header)],
+) -> Principal:
+    """An ``X-API-Key`` header, else the session cookie; 401 without either."""
+    if key:
+        row = _check_key(request, session, key)
+        club = crud.get_club(session, row.club_id)
+        if club is None:  # the key outlived its club (cascade should prevent this)
+            raise ApiError(401, "unauthorized", "the API key's club no longer exists")
+        return Principal(club)
+    user = _signed_in(request, session)
+    if user is None:
+        raise ApiError(
+            401, "unauthorized", "an X-API-Key header or a signed-in session is required",
+            headers={"WWW-Authenticate": "X-API-Key"},
+        )  # fmt: skip
+    club = crud.get_club(session, user.club_id)
+    if club is None:
+        raise ApiError(401, "unauthorized", "your club no longer exists")
+    return Principal(club, user)
+
+
+CurrentPrincipal = Annotated[Principal, Depends(get_principal)]
+
+
+def get_coach(principal: CurrentPrincipal) -> Principal:
+    principal.require_coach()
+    return principal
+
+
+#: A caller with a coach's rights: an API key or a signed-in coach (403 for a performer).
+CurrentCoach = Annotated[Principal, Depends(get_coach)]
+
+
+def get_coach_club(who: CurrentCoach) -> Club:
+    return who.club
+
+
+#: The club of a caller with a coach's rights (club settings, keys, performers).
+CoachClub = Annotated[Club, Depends(get_coach_club)]
 
 
 def get_current_user(request: Request, session: SessionDep) -> User:
-    """The browser user signed in through ``POST /api/v1/session`` (signed session cookie)."""
-    user_id = request.session.get("user_id")
-    user = crud.get_user(session, int(user_id)) if isinstance(user_id, int) else None
+    """The signed-in user (session cookie); 401 when nobody is."""
+    user = _signed_in(request, session)
     if user is None:
         raise ApiError(401, "unauthorized", "sign in first")
     return user

@@ -1,7 +1,8 @@
 """Progress over time: one performer's analyses, and two attempts side by side.
 
-Plain functions of result documents (no requests, no database), so the endpoints in
-:mod:`web.pages.api` stay thin and the numbers are testable on their own.
+Plain functions of results (no requests, no database), so the endpoints in
+:mod:`app.api.routes.performers` stay thin and the numbers are testable on their own. A result is a
+:class:`engine.io.result_reader.Result` or its document.
 
 Two attempts of the same reference line up through the reference: each video frame t' has
 its reference frame C(t') (``reference_frame``), so both error curves are plotted against the
@@ -11,30 +12,30 @@ reference's frames and attempts of different speeds share one timeline.
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from functools import lru_cache
-from pathlib import Path
 from typing import Any
 
-from app.api.routes.analyses import summarise_segments
+from app.core.summary import summarise_segments
+from engine.errors import InvalidInput
+from engine.io.result_reader import Result, as_result, read_result
 
 #: A change smaller than this (degrees, or tempo ratio x 100 %) counts as "about the same".
 SAME_ERROR_DEG = 1.0
 SAME_TEMPO = 0.05
 
 
-def mean_error_deg(result: dict[str, Any]) -> float | None:
+def mean_error_deg(result: Result | Mapping[str, Any]) -> float | None:
     """Mean posture error eps_t' over the video frames, or None without frames."""
-    errs = [float(f["posture_error_deg"]) for f in result.get("frames") or []]
+    errs = [f.posture_error_deg for f in as_result(result).frames]
     return sum(errs) / len(errs) if errs else None
 
 
 @lru_cache(maxsize=256)
 def _mean_error_file(path: str, mtime: float) -> float | None:
-    import json
-
     try:
-        return mean_error_deg(json.loads(Path(path).read_text()))
-    except (OSError, ValueError, KeyError, TypeError):
+        return mean_error_deg(read_result(path))
+    except (OSError, InvalidInput):
         return None
 
 
@@ -64,23 +65,22 @@ def _tempo_change(a: float | None, b: float | None) -> str | None:
     return _change(abs(a - 1.0), abs(b - 1.0), SAME_TEMPO)
 
 
-def error_curve(result: dict[str, Any]) -> list[list[float]]:
+def error_curve(result: Result | Mapping[str, Any]) -> list[list[float]]:
     """``[[reference_frame, posture_error_deg], ...]`` in video order (C is monotone)."""
     return [
-        [float(f["reference_frame"]), round(float(f["posture_error_deg"]), 3)]
-        for f in result.get("frames") or []
+        [float(f.reference_frame), round(f.posture_error_deg, 3)] for f in as_result(result).frames
     ]
 
 
 def compare_results(
-    result_a: dict[str, Any], result_b: dict[str, Any], names: list[str]
+    result_a: Result | Mapping[str, Any], result_b: Result | Mapping[str, Any], names: list[str]
 ) -> dict[str, Any]:
     """Attempt A (earlier) against attempt B (later) of the same reference.
 
     Parameters
     ----------
-    result_a, result_b : dict
-        Result documents (DESIGN.md).
+    result_a, result_b : Result or dict
+        Results, or their documents (DESIGN.md).
     names : list of str
         Segment names, by the reference's segment index.
 
@@ -94,7 +94,8 @@ def compare_results(
         ``curves`` ({a, b}: :func:`error_curve`) and ``reference_frames`` ([first, last]
         reference frame either curve covers).
     """
-    seg_a, seg_b = summarise_segments(result_a), summarise_segments(result_b)
+    result_a, result_b = as_result(result_a), as_result(result_b)
+    seg_a, seg_b = summarise_segments(result_a.doc), summarise_segments(result_b.doc)
     rows = []
     for i in range(max(len(seg_a), len(seg_b))):
         sides = {}

@@ -1,7 +1,9 @@
-"""Files the pages serve: a browser-playable video, skeleton thumbnails, CSV and BVH exports.
+"""Files the API serves: a browser-playable video, skeleton thumbnails, CSV and BVH exports.
 
-Everything here is a plain function of paths and result documents (no request objects), so
-the routes stay thin and the functions are testable on their own.
+Everything here is a plain function of paths and results (no request objects), so the routes
+stay thin and the functions are testable on their own. A result is a
+:class:`engine.io.result_reader.Result` or its document; a malformed document raises
+:class:`engine.errors.InvalidInput`.
 """
 
 from __future__ import annotations
@@ -10,6 +12,7 @@ import csv
 import io
 import os
 import threading
+from collections.abc import Mapping
 from fractions import Fraction
 from functools import lru_cache
 from pathlib import Path
@@ -18,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from engine.body.skeleton import BONE_CHILD, BONE_NAMES, BONE_PARENT, JOINTS
+from engine.io.result_reader import Result, as_result
 from engine.report import MISFIT_RGB
 
 #: Longest side of the browser rendition; phones do not need more and encoding stays quick.
@@ -207,28 +211,29 @@ def reference_preview(
 REPORT_STILLS = 4
 
 
-def still_frames(result: dict[str, Any], n: int = REPORT_STILLS) -> list[int]:
-    """Indices into ``result["frames"]``: each segment's worst frame, then evenly spaced.
+def still_frames(result: Result | Mapping[str, Any], n: int = REPORT_STILLS) -> list[int]:
+    """Indices into ``result.frames``: each segment's worst frame, then evenly spaced.
 
     A segment with frames the video does not confirm (``image_misfit``) shows the worst of
     those instead, where the dashed posture tells what the reported one misses.
     """
-    frames = result.get("frames") or []
+    result = as_result(result)
+    frames = result.frames
     if not frames:
         return []
-    t_to_i = {int(f["t"]): i for i, f in enumerate(frames)}
+    t_to_i = result.frame_index
     picks: list[int] = []
-    for seg in result.get("segments") or []:
-        a, b = int(seg["performer_start"]), int(seg["performer_end"])
+    for seg in result.segments:
+        a, b = seg.performer_start, seg.performer_end
         inside = [t_to_i[t] for t in range(a, b + 1) if t in t_to_i]
-        misfit = [i for i in inside if "image_misfit" in (frames[i].get("flags") or ())]
-        worst = seg.get("worst_frame")
+        misfit = [i for i in inside if "image_misfit" in frames[i].flags]
+        worst = seg.worst_frame
         if misfit:
-            i = max(misfit, key=lambda k: float(frames[k]["posture_error_deg"]))
-        elif worst is not None and int(worst) in t_to_i:
-            i = t_to_i[int(worst)]
+            i = max(misfit, key=lambda k: frames[k].posture_error_deg)
+        elif worst is not None and worst in t_to_i:
+            i = t_to_i[worst]
         elif inside:
-            i = max(inside, key=lambda k: float(frames[k]["posture_error_deg"]))
+            i = max(inside, key=lambda k: frames[k].posture_error_deg)
         else:
             continue
         if i not in picks:
@@ -242,7 +247,11 @@ def still_frames(result: dict[str, Any], n: int = REPORT_STILLS) -> list[int]:
 
 
 def report_stills(
-    video_path: str | Path, work_dir: str | Path, result: dict[str, Any], *, n: int = REPORT_STILLS
+    video_path: str | Path,
+    work_dir: str | Path,
+    result: Result | Mapping[str, Any],
+    *,
+    n: int = REPORT_STILLS,
 ) -> list[dict[str, Any]]:
     """Video frames with the selected skeleton drawn over them (bones coloured by error), as
     JPEG data URIs for the printable report (inline, so printing needs no further requests).
@@ -260,14 +269,14 @@ def report_stills(
 
     from engine.report import draw_skeleton
 
-    frames = result.get("frames") or []
+    result = as_result(result)
+    frames = result.frames
     picks = still_frames(result, n)
     if not picks:
         return []
-    wanted = {int(frames[i]["t"]): i for i in picks}
-    vw = float((result.get("video") or {}).get("width") or 0)
-    vh = float((result.get("video") or {}).get("height") or 0)
-    fps = float((result.get("video") or {}).get("fps") or 30.0)
+    wanted = {frames[i].t: i for i in picks}
+    vw, vh = float(result.video.width), float(result.video.height)
+    fps = result.video.fps or 30.0
     out: list[dict[str, Any]] = []
     try:
         src = playable_video(video_path, work_dir)  # rotation applied, as the page shows it
@@ -284,18 +293,17 @@ def report_stills(
                     h, w = round(h * 480 / w), 480
                     rgb = cv2.resize(rgb, (w, h), interpolation=cv2.INTER_AREA)
                 scale = [w / (vw or w), h / (vh or h)]
-                j2 = np.asarray(f["joints_2d"], float) * scale
-                best = f.get("image_best_joints_2d")  # image_misfit frames: what the video shows
+                best = f.image_best_joints_2d  # image_misfit frames: what the video shows
                 drawn = draw_skeleton(
-                    rgb, j2, np.asarray(f["bone_errors_deg"], float),
-                    None if best is None else np.asarray(best, float) * scale,
+                    rgb, f.joints_2d * scale, f.bone_errors_deg,
+                    None if best is None else best * scale,
                 )  # fmt: skip
                 ok, buf = cv2.imencode(
                     ".jpg", cv2.cvtColor(drawn, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 85]
                 )
                 if ok:
                     out.append({
-                        "t": t, "time_s": t / fps, "error_deg": float(f["posture_error_deg"]),
+                        "t": t, "time_s": t / fps, "error_deg": f.posture_error_deg,
                         "src": "data:image/jpeg;base64," + base64.b64encode(buf.tobytes()).decode(),
                     })  # fmt: skip
     except Exception:  # a report without pictures beats no report
@@ -327,11 +335,12 @@ def joint_angles_deg(joints: np.ndarray) -> np.ndarray:
     return np.degrees(np.arccos(cos))
 
 
-def result_csv(result: dict[str, Any]) -> str:
+def result_csv(result: Result | Mapping[str, Any]) -> str:
     """One row per video frame: timing, errors per bone, each bone's range over the
     candidates the video cannot tell apart (``range_deg:BONE`` as ``lo-hi``; empty for
     results that predate it), the performer's joint angles."""
-    frames = result.get("frames") or []
+    result = as_result(result)
+    frames = result.frames
     buf = io.StringIO()
     w = csv.writer(buf)
     w.writerow(
@@ -340,29 +349,26 @@ def result_csv(result: dict[str, Any]) -> str:
         + [f"range_deg:{b}" for b in BONE_NAMES]
         + [a[0] for a in JOINT_ANGLES]
     )
-    fps = float((result.get("video") or {}).get("fps") or 0) or 1.0
-    joints = np.array([f["joints_3d"] for f in frames], float).reshape(-1, len(JOINTS), 3)
-    angles = joint_angles_deg(joints) if len(frames) else np.zeros((0, len(JOINT_ANGLES)))
+    fps = result.video.fps or 1.0
+    angles = joint_angles_deg(result.joints_3d) if len(frames) else np.zeros((0, len(JOINT_ANGLES)))
     for f, a in zip(frames, angles, strict=True):
+        ranges = () if f.bone_error_range_deg is None else f.bone_error_range_deg
         w.writerow(
-            [f["t"], f"{f['t'] / fps:.4f}", f["reference_frame"], f.get("selected", 0),
-             f"{float(f['posture_error_deg']):.3f}"]
-            + [f"{float(e):.3f}" for e in f["bone_errors_deg"]]
-            + [f"{lo:.1f}-{hi:.1f}" for lo, hi in f.get("bone_error_range_deg", [])]
-            + [""] * (len(BONE_NAMES) - len(f.get("bone_error_range_deg", [])))
-            + [f"{float(x):.3f}" for x in a]
+            [f.t, f"{f.t / fps:.4f}", f.reference_frame, f.selected, f"{f.posture_error_deg:.3f}"]
+            + [f"{e:.3f}" for e in f.bone_errors_deg]
+            + [f"{lo:.1f}-{hi:.1f}" for lo, hi in ranges]
+            + [""] * (len(BONE_NAMES) - len(ranges))
+            + [f"{x:.3f}" for x in a]
         )  # fmt: skip
     return buf.getvalue()
 
 
-def result_bvh(result: dict[str, Any], dest: Path) -> Path:
+def result_bvh(result: Result | Mapping[str, Any], dest: Path) -> Path:
     """The performer's selected motion (joints_3d with root motion) as BVH at ``dest``."""
     from engine.io.bvh import write_bvh
 
-    frames = result.get("frames") or []
-    joints = np.array([f["joints_3d"] for f in frames], float).reshape(-1, len(JOINTS), 3)
-    fps = float((result.get("video") or {}).get("fps") or 30.0)
-    return write_bvh(dest, joints, fps)
+    result = as_result(result)
+    return write_bvh(dest, result.joints_3d, result.video.fps or 30.0)
 
 
 #: Heights (deg) of the error plots' axes, four whole-degree grid steps each (analysis.js too)
@@ -376,12 +382,15 @@ def plot_top(most: float) -> int:
     return next((v for v in PLOT_TOPS if v >= most * 1.1), PLOT_TOPS[-1])
 
 
-def error_plot_svg(result: dict[str, Any], *, width: int = 720, height: int = 180) -> str:
+def error_plot_svg(
+    result: Result | Mapping[str, Any], *, width: int = 720, height: int = 180
+) -> str:
     """eps_t' over the video frames with segment boundaries, as an inline SVG (printable)."""
-    frames = result.get("frames") or []
+    result = as_result(result)
+    frames = result.frames
     if not frames:
         return ""
-    err = np.array([f["posture_error_deg"] for f in frames], float)
+    err = result.posture_error_deg
     top = plot_top(float(np.nanmax(err)) if np.isfinite(err).any() else 0.0)
     n = max(len(frames) - 1, 1)
     pad = 30
@@ -398,14 +407,14 @@ def error_plot_svg(result: dict[str, Any], *, width: int = 720, height: int = 18
     # frames the video does not confirm (image_misfit): their errors may be too small
     step = (width - pad - 6) / n
     for i, f in enumerate(frames):
-        if "image_misfit" in (f.get("flags") or ()):
+        if "image_misfit" in f.flags:
             parts.append(
                 f'<rect class="misfit-mark" x="{x(i) - step / 2:.1f}" y="6" width="{step:.1f}" '
                 f'height="{height - 26}" fill="rgb{MISFIT_RGB}" fill-opacity="0.35"/>'
             )
-    for s in result.get("segments") or []:
+    for s in result.segments:
         parts.append(
-            f'<line x1="{x(s["performer_start"]):.1f}" x2="{x(s["performer_start"]):.1f}" '
+            f'<line x1="{x(s.performer_start):.1f}" x2="{x(s.performer_start):.1f}" '
             f'y1="6" y2="{height - 20}" stroke="#999" stroke-dasharray="3 3"/>'
         )
     for v in np.linspace(0, top, 5):

@@ -10,13 +10,26 @@ import pytest
 
 from app.core.security import verify_webhook
 from app.models import Analysis
+from engine.body.skeleton import JOINTS
 from tests.app.conftest import make_club, stored_files, upload
+
+
+def _frame(t: int) -> dict:
+    """A complete result frame (engine.io.result_reader checks every key)."""
+    j2 = [[160.0 + 10 * j, 100.0 + 5 * j] for j in range(17)]
+    j3 = [[0.1 * j, 1.0 - 0.05 * j, 0.0] for j in range(17)]
+    return {"t": t, "reference_frame": 1 + 3 * t, "joints_3d": j3, "joints_2d": j2,
+            "candidates": [j3], "selected": 0, "posture_error_deg": 9.5,
+            "bone_errors_deg": [9.5] * 16, "flags": ["image_misfit"] if t in (5, 6) else []}
+
 
 RESULT = {
     "version": 1,
     "reference": {"name": "swing", "frames": 580, "fps": 120.0},
     "video": {"frames": 137, "fps": 30.0, "width": 320, "height": 240},
-    "frames": [{"t": t, "flags": ["image_misfit"] if t in (5, 6) else []} for t in range(71)],
+    "joints": list(JOINTS),
+    "camera": {"scale": 100.0, "theta_z_deg": 0.0, "cx": 160.0, "cy": 120.0},
+    "frames": [_frame(t) for t in range(71)],
     "segments": [
         {"reference_start": 1, "reference_end": 241, "performer_start": 0,
          "performer_end": 70, "mean_error_deg": 9.5,
@@ -25,9 +38,9 @@ RESULT = {
     "timing_s": {"total": 12.5},
 }  # fmt: skip
 # frame 5 also says what the video shows there: the right ankle 20 px to the right
-_J2 = [[160.0 + 10 * j, 100.0 + 5 * j] for j in range(17)]
+_J2 = RESULT["frames"][5]["joints_2d"]
 RESULT["frames"][5].update(
-    joints_2d=_J2, image_best_joints_2d=[[u + 20.0 * (j == 6), v] for j, (u, v) in enumerate(_J2)]
+    image_best_joints_2d=[[u + 20.0 * (j == 6), v] for j, (u, v) in enumerate(_J2)]
 )
 
 

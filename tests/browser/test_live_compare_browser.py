@@ -61,7 +61,7 @@ def test_3d_view_fills_in_while_the_analysis_runs(server, browser, long_clip, sh
     page = ctx.new_page()
     sign_in(page, server.url, "olive@example.com")
     r = page.request.post(
-        f"{server.url}/web/api/analyses",
+        f"{server.url}/api/v1/analyses",
         multipart={
             "video": {"name": "swing.mp4", "mimeType": "video/mp4",
                       "buffer": long_clip.read_bytes()},
@@ -69,7 +69,7 @@ def test_3d_view_fills_in_while_the_analysis_runs(server, browser, long_clip, sh
         },
     )  # fmt: skip
     assert r.status == 201, r.text()
-    page.goto(server.url + r.json()["url"])
+    page.goto(f"{server.url}/analyses/{r.json()['id']}")
     live = page.locator("#live3d")
     page.wait_for_selector(
         "#live3d[data-phase=reference], #live3d[data-phase=candidates]", timeout=90_000

@@ -10,8 +10,8 @@ import re
 import numpy as np
 import pytest
 
+from app.core import media
 from tests.browser.conftest import COACH, sign_in
-from web.pages import media
 
 pytestmark = pytest.mark.browser
 

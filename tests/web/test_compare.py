@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
+from app.core import compare
 from tests.web.test_pages import add_done, env, fake_result, sign_in  # noqa: F401 - fixture
-from web.pages import compare
 
 
 def slower_better(result: dict) -> dict:
@@ -70,25 +70,25 @@ def test_history_and_compare_endpoints(env):  # noqa: F811
     others = add_done(app, settings, ids, ids["other"])
 
     sign_in(client, "c@a.org")
-    h = client.get(f"/web/api/performers/{ids['perf']}/history").json()
+    h = client.get(f"/api/v1/performers/{ids['perf']}/history").json()
     assert [a["id"] for a in h["analyses"]] == [first, second]
     assert all(a["mean_error_deg"] > 0 for a in h["analyses"])
-    r = client.get(f"/web/api/performers/{ids['perf']}/compare", params={"a": first, "b": second})
+    r = client.get(f"/api/v1/performers/{ids['perf']}/compare", params={"a": first, "b": second})
     assert r.status_code == 200, r.text
     d = r.json()
     assert d["a"]["id"] == first and d["b"]["video"].endswith(f"{second}/video.mp4")
     assert d["segments"][0]["error_change"] == "better"
     assert len(d["curves"]["b"]) == 2 * len(d["curves"]["a"])
     # Another performer's analysis is refused.
-    r = client.get(f"/web/api/performers/{ids['perf']}/compare", params={"a": first, "b": others})
+    r = client.get(f"/api/v1/performers/{ids['perf']}/compare", params={"a": first, "b": others})
     assert r.status_code == 422
     assert client.get(f"/performers/{ids['perf']}/compare").status_code == 200
 
     # A performer sees their own progress only.
     sign_in(client, "o@a.org")
-    assert client.get(f"/web/api/performers/{ids['perf']}/history").status_code == 404
+    assert client.get(f"/api/v1/performers/{ids['perf']}/history").status_code == 404
     assert client.get(f"/performers/{ids['perf']}/compare").status_code == 404
-    assert client.get(f"/web/api/performers/{ids['other']}/history").status_code == 200
+    assert client.get(f"/api/v1/performers/{ids['other']}/history").status_code == 200
 
 
 def test_compare_refuses_unfinished_and_different_references(env):  # noqa: F811
@@ -109,6 +109,6 @@ def test_compare_refuses_unfinished_and_different_references(env):  # noqa: F811
         s.commit()
         running_id = running.id
     sign_in(client, "c@a.org")
-    url = f"/web/api/performers/{ids['perf']}/compare"
+    url = f"/api/v1/performers/{ids['perf']}/compare"
     assert client.get(url, params={"a": done, "b": other_ref}).status_code == 422
     assert client.get(url, params={"a": done, "b": running_id}).status_code == 409

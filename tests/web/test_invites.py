@@ -1,4 +1,4 @@
-"""Invite links: hashed, expiring, single-use tokens (web.invites) and their endpoints."""
+"""Invite links: hashed, expiring, single-use tokens (app.core.invites) and their endpoints."""
 
 from __future__ import annotations
 
@@ -8,9 +8,9 @@ import pytest
 from sqlalchemy import select
 
 from app import crud
+from app.core import invites
 from app.core.db import make_engine, make_sessionmaker, run_migrations
 from app.models import Invite, User
-from web import invites
 
 T0 = datetime(2030, 1, 1, 12, 0, tzinfo=UTC)
 DETAILS = {"display_name": "Nina New", "email": "Nina@Example.com", "password": "a long password"}

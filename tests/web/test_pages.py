@@ -14,6 +14,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app import crud
+from app.core import media
 from app.core.config import Settings
 from app.core.queue import get_queue
 from app.main import create_app
@@ -21,7 +22,6 @@ from app.models import Analysis
 from engine.body.skeleton import BONE_NAMES, JOINTS
 from engine.report import ONE_CAMERA_NOTE
 from tests.app.conftest import SAMPLE_BVH, SAMPLE_VIDEO, RecordingQueue
-from web.pages import media
 
 PASSWORD = "correct horse battery"
 
@@ -162,14 +162,13 @@ def test_upload_from_the_page_queues_for_the_signed_in_performer(env):
     _, client, ids, queue, _ = env
     sign_in(client, "p@a.org")
     with open(SAMPLE_VIDEO, "rb") as f:
-        r = client.post("/web/api/analyses", data={"reference_id": ids["ref"]},
+        r = client.post("/api/v1/analyses", data={"reference_id": ids["ref"]},
                         files={"video": ("clip.mp4", f, "video/mp4")})  # fmt: skip
     assert r.status_code == 201, r.text
-    assert r.json()["url"] == f"/analyses/{r.json()['id']}"
     assert len(queue.jobs) == 1
-    status = client.get(f"/web/api/analyses/{r.json()['id']}").json()
+    status = client.get(f"/api/v1/analyses/{r.json()['id']}").json()
     assert status["performer_id"] == ids["perf"] and status["status"] == "queued"
-    assert "Analysing your video" in client.get(r.json()["url"]).text
+    assert "Analysing your video" in client.get(f"/analyses/{r.json()['id']}").text
 
 
 def test_performers_see_only_their_own_analyses(env):
@@ -177,8 +176,8 @@ def test_performers_see_only_their_own_analyses(env):
     mine = add_done(app, settings, ids, ids["perf"])
     theirs = add_done(app, settings, ids, ids["other"])
     sign_in(client, "p@a.org")
-    assert client.get(f"/web/api/analyses/{mine}/result").status_code == 200
-    assert client.get(f"/web/api/analyses/{theirs}/result").status_code == 404
+    assert client.get(f"/api/v1/analyses/{mine}/result").status_code == 200
+    assert client.get(f"/api/v1/analyses/{theirs}/result").status_code == 404
     assert client.get(f"/analyses/{theirs}").status_code == 404
 
 
@@ -186,20 +185,20 @@ def test_results_summary_video_and_exports(env):
     app, client, ids, _, settings = env
     aid = add_done(app, settings, ids, ids["perf"])
     sign_in(client, "p@a.org")
-    summary = client.get(f"/web/api/analyses/{aid}/summary").json()
+    summary = client.get(f"/api/v1/analyses/{aid}/summary").json()
     assert [s["name"] for s in summary["segments"]] == ["segment 1", "segment 2"]
     assert summary["segments"][1]["worst_bones"][0][0] == BONE_NAMES[15]
-    r = client.get(f"/web/api/analyses/{aid}/video.mp4")
+    r = client.get(f"/api/v1/analyses/{aid}/video.mp4")
     assert r.status_code == 200 and r.headers["content-type"] == "video/mp4"
     import av
 
     with av.open(io.BytesIO(r.content)) as c:
         assert c.streams.video[0].codec_context.name == "h264"
-    rows = list(csv.reader(io.StringIO(client.get(f"/web/api/analyses/{aid}/export.csv").text)))
+    rows = list(csv.reader(io.StringIO(client.get(f"/api/v1/analyses/{aid}/export.csv").text)))
     assert rows[0][:5] == ["t", "time_s", "reference_frame", "selected", "posture_error_deg"]
     assert len(rows) == 1 + 8 and len(rows[1]) == len(rows[0])
     assert float(rows[2][rows[0].index(f"error_deg:{BONE_NAMES[0]}")]) == pytest.approx(15.0)
-    bvh = client.get(f"/web/api/analyses/{aid}/export.bvh")
+    bvh = client.get(f"/api/v1/analyses/{aid}/export.bvh")
     assert bvh.status_code == 200 and bvh.text.startswith("HIERARCHY")
     assert "attachment" in bvh.headers["content-disposition"]
 
@@ -208,7 +207,7 @@ def test_comments_pinned_and_persisted(env):
     app, client, ids, _, settings = env
     aid = add_done(app, settings, ids, ids["perf"])
     sign_in(client, "c@a.org")
-    base = f"/web/api/analyses/{aid}/comments"
+    base = f"/api/v1/analyses/{aid}/comments"
     assert client.post(base, json={"body": "elbow!", "frame": 3}).status_code == 201
     assert client.post(base, json={"body": "slow top", "segment": 1}).status_code == 201
     assert client.post(base, json={"body": ""}).status_code == 422
@@ -226,26 +225,27 @@ def test_comments_pinned_and_persisted(env):
 def test_reference_thumbnail_and_domain_edit(env):
     _, client, ids, _, settings = env
     sign_in(client, "c@a.org")
-    refs = client.get("/web/api/references").json()
+    refs = client.get("/api/v1/references").json()
     assert refs[0]["segment_names"] == ["segment 1", "segment 2"]
     svg = client.get(refs[0]["thumbnail"])
     assert svg.status_code == 200 and svg.text.startswith("<svg") and svg.text.count("<line") == 16
-    r = client.put(f"/web/api/references/{ids['ref']}/domain", json={
+    r = client.put(f"/api/v1/references/{ids['ref']}/domain", json={
         "segment_names": ["backswing", "downswing"], "bone_weights": {"l_elbow": 2},
         "tolerances_deg": {"l_knee": 15}})  # fmt: skip
     assert r.status_code == 200, r.text
     assert r.json()["segment_names"] == ["backswing", "downswing"]
-    stored = json.loads((settings.data_dir / "references" / str(ids["ref"])
-                         / "reference.domain.json").read_text())  # fmt: skip
+    # stored once, with the reference (every analysis request carries it); no file beside it
+    stored = client.get(f"/api/v1/references/{ids['ref']}").json()["domain"]
     assert stored["bone_weights"] == {"l_elbow": 2}
-    bad = client.put(f"/web/api/references/{ids['ref']}/domain",
+    assert list((settings.data_dir / "references" / str(ids["ref"])).glob("*.json")) == []
+    bad = client.put(f"/api/v1/references/{ids['ref']}/domain",
                      json={"bone_weights": {"tail": 1}})  # fmt: skip
     assert bad.status_code == 422
-    three = client.put(f"/web/api/references/{ids['ref']}/domain",
+    three = client.put(f"/api/v1/references/{ids['ref']}/domain",
                        json={"segment_names": ["a", "b", "c"]})  # fmt: skip
     assert three.status_code == 422 and "2 segments, got 3" in three.text
     sign_in(client, "p@a.org")
-    assert client.put(f"/web/api/references/{ids['ref']}/domain", json={}).status_code == 403
+    assert client.put(f"/api/v1/references/{ids['ref']}/domain", json={}).status_code == 403
 
 
 def test_joint_angles_of_a_right_angle():

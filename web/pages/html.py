@@ -1,4 +1,4 @@
-"""The HTML pages. Data comes from the JSON endpoints in :mod:`web.pages.api` (fetched by the
+"""The HTML pages. Data comes from the API (:mod:`app.api.routes`, fetched by the
 page scripts) or, for the dashboard and the printable report, is rendered here."""
 
 from __future__ import annotations
@@ -13,14 +13,15 @@ from fastapi.responses import HTMLResponse, RedirectResponse
 from fastapi.templating import Jinja2Templates
 
 from app import crud
-from app.api.deps import NotifierDep, SessionDep
+from app.api import access
+from app.api.deps import NotifierDep, Principal, SessionDep
 from app.api.errors import ApiError
-from app.api.routes.analyses import summarise_segments
+from app.api.routes.comments import comment_rows
+from app.core import invites, media
 from app.core.reflect import reflect
+from app.core.summary import segment_names, summarise_segments
 from app.models import ANALYSIS_STATES, User
 from engine.report import ONE_CAMERA_NOTE
-from web import invites
-from web.pages import api, media
 
 TEMPLATES = Jinja2Templates(directory=Path(__file__).resolve().parents[1] / "templates")
 TEMPLATES.env.globals["one_camera_note"] = ONE_CAMERA_NOTE
@@ -30,6 +31,14 @@ router = APIRouter(include_in_schema=False)
 def page_user(request: Request, session) -> User | None:
     uid = request.session.get("user_id")
     return crud.get_user(session, uid) if isinstance(uid, int) else None
+
+
+def _principal(session, user: User) -> Principal:
+    """The signed-in user as the API's principal, so pages see exactly what the API shows."""
+    club = crud.get_club(session, user.club_id)
+    if club is None:
+        raise ApiError(401, "unauthorized", "your club no longer exists")
+    return Principal(club, user)
 
 
 def _sign_in(request: Request) -> RedirectResponse:
@@ -110,7 +119,7 @@ def _analysis(request, analysis_id, session, notifier, *, review: bool):
     if review and user.role != "coach":
         return _forbidden(request, user, "Only coaches review analyses.")
     try:
-        a = api.get_analysis_for(session, user, analysis_id)
+        a = access.analysis_for(session, _principal(session, user), analysis_id)
     except ApiError:
         return _render(request, "message.html", user, 404, title="Not found",
                        message="There is no such analysis in your club.")  # fmt: skip
@@ -124,21 +133,21 @@ def report_page(request: Request, analysis_id: str, session: SessionDep, notifie
     if user is None:
         return _sign_in(request)
     try:
-        a = api.get_analysis_for(session, user, analysis_id)
-        result = api.load_result(session, a, notifier)
+        a = access.done_analysis(session, _principal(session, user), analysis_id, notifier)
+        result = access.result_of(a)
     except ApiError as exc:
         return _render(request, "message.html", user, exc.status_code, title="No report",
                        message=exc.message)  # fmt: skip
     segments = summarise_segments(result)
-    names = api.segment_names(a.reference, len(segments))
-    frames = result.get("frames") or []
-    comments = api.list_comment_rows(session, a)
+    names = segment_names(a.reference, len(segments))
+    frames = result.frames
+    comments = comment_rows(session, a)
     stills = media.report_stills(a.video_path, a.work_dir, result)  # sync route: a threadpool
     return _render(
-        request, "report.html", user, analysis=a, result=result, frames=frames,
+        request, "report.html", user, analysis=a, result=result.doc, frames=frames,
         segments=list(zip(segments, names, strict=True)), comments=comments,
-        plot=media.error_plot_svg(result), fps=float(result["video"]["fps"]), stills=stills,
-        mean_error=(sum(f["posture_error_deg"] for f in frames) / len(frames)) if frames else 0.0,
+        plot=media.error_plot_svg(result), fps=result.video.fps, stills=stills,
+        mean_error=(sum(f.posture_error_deg for f in frames) / len(frames)) if frames else 0.0,
     )  # fmt: skip
 
 
@@ -203,7 +212,7 @@ def compare_page(
     if user is None:
         return _sign_in(request)
     try:
-        performer = api.get_performer_for(session, user, performer_id)
+        performer = access.performer_for(session, _principal(session, user), performer_id)
     except ApiError:
         return _render(request, "message.html", user, 404, title="Not found",
                        message="There is no such performer in your club.")  # fmt: skip

@@ -6,7 +6,7 @@
   const root = document.getElementById("analysis");
   const id = root.dataset.id;
   const review = root.dataset.review === "true";
-  const base = "/web/api/analyses/" + id;
+  const base = "/api/v1/analyses/" + id;
   const $ = function (s) { return document.getElementById(s); };
   const SVGNS = "http://www.w3.org/2000/svg";
   const BONES = ["hip->l_hip", "l_hip->l_knee", "l_knee->l_ankle", "hip->r_hip", "r_hip->r_knee",

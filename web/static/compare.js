@@ -167,12 +167,12 @@
 
   async function load(a, b) {
     showError("");
-    try { renderComparison(await coach.api("/web/api/performers/" + pid + "/compare?a=" + encodeURIComponent(a) + "&b=" + encodeURIComponent(b))); }
+    try { renderComparison(await coach.api("/api/v1/performers/" + pid + "/compare?a=" + encodeURIComponent(a) + "&b=" + encodeURIComponent(b))); }
     catch (e) { $("comparison").hidden = true; showError(e.message); }
   }
   (async function start() {
     try {
-      history = (await coach.api("/web/api/performers/" + pid + "/history")).analyses;
+      history = (await coach.api("/api/v1/performers/" + pid + "/history")).analyses;
     } catch (e) { $("history-error").textContent = e.message; $("history-error").hidden = false; return; }
     let sel = { a: root.dataset.a, b: root.dataset.b };
     if (!sel.a || !sel.b) sel = defaults();

@@ -10,7 +10,7 @@
     ev.preventDefault();
     err.hidden = true;
     try {
-      const r = await coach.api("/web/api/invites", { method: "POST", json: {
+      const r = await coach.api("/api/v1/invites", { method: "POST", json: {
         display_name: document.getElementById("invite-name").value.trim(),
         days: +document.getElementById("invite-days").value } });
       link.value = r.url;

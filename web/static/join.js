@@ -9,7 +9,7 @@
     const button = form.querySelector("button[type=submit]");
     button.disabled = true;
     try {
-      const r = await coach.api("/web/api/join/" + encodeURIComponent(form.dataset.token), { method: "POST", json: {
+      const r = await coach.api("/api/v1/join/" + encodeURIComponent(form.dataset.token), { method: "POST", json: {
         display_name: document.getElementById("join-name").value.trim(),
         email: document.getElementById("join-email").value.trim(),
         password: document.getElementById("join-password").value } });

@@ -21,7 +21,7 @@
     const button = form.querySelector("button[type=submit]");
     button.disabled = true; button.textContent = "Importing…";
     try {
-      await coach.api("/web/api/references", { method: "POST", body: data });
+      await coach.api("/api/v1/references", { method: "POST", body: data });
       form.reset();
       await load();
     } catch (e) { err.textContent = e.message; err.hidden = false; }
@@ -66,7 +66,7 @@
       f.querySelectorAll("input.w").forEach(function (i) { if (i.value !== "" && +i.value !== 1) weights[i.dataset.bone] = +i.value; });
       f.querySelectorAll("input.t").forEach(function (i) { if (i.value !== "") tols[i.dataset.bone] = +i.value; });
       try {
-        await coach.api("/web/api/references/" + r.id + "/domain", { method: "PUT", json: {
+        await coach.api("/api/v1/references/" + r.id + "/domain", { method: "PUT", json: {
           name: nameInput.value.trim() || null,
           segment_names: segInput.value.split("\n").map(function (s) { return s.trim(); }).filter(Boolean),
           bone_weights: weights, tolerances_deg: tols, default_tolerance_deg: +dflt.value || 0 } });
@@ -82,7 +82,7 @@
   }
 
   async function load() {
-    const refs = await coach.api("/web/api/references");
+    const refs = await coach.api("/api/v1/references?limit=100");
     listEl.textContent = "";
     if (!refs.length) listEl.append(coach.el("p", { class: "muted", text: "No references yet." }));
     refs.forEach(function (r) { listEl.append(card(r)); });

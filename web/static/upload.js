@@ -41,7 +41,7 @@
     return e.message.charAt(0).toUpperCase() + e.message.slice(1) + ".";
   }
 
-  coach.api("/web/api/references").then(function (refs) {
+  coach.api("/api/v1/references?limit=100").then(function (refs) {
     list.textContent = "";
     if (!refs.length) { list.append(coach.el("p", { text: "No reference motions yet: ask your coach to add one." })); return; }
     refs.forEach(function (r, i) {
@@ -138,7 +138,7 @@
     if (performer) data.append("performer_id", performer.value);
     data.append("video", file, file.name);
     const xhr = new XMLHttpRequest();
-    xhr.open("POST", "/web/api/analyses");
+    xhr.open("POST", "/api/v1/analyses");
     xhr.setRequestHeader("Accept", "application/json");
     // A retry of the same file reuses the analysis instead of making a second one.
     xhr.setRequestHeader("Idempotency-Key", [file.name, file.size, file.lastModified, ref.value, Date.now() >> 16].join(":").slice(0, 255));
@@ -152,7 +152,7 @@
       try { body = JSON.parse(xhr.responseText); } catch (e) { body = null; }
       if (xhr.status === 200 || xhr.status === 201) {
         bar.value = 100; pct.textContent = "100 %";
-        location.href = body.url;
+        location.href = "/analyses/" + encodeURIComponent(body.id);
       } else {
         button.disabled = false;
         prog.hidden = true;

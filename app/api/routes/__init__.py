@@ -2,7 +2,17 @@
 
 from fastapi import APIRouter
 
-from app.api.routes import analyses, club, health, keys, performers, references, session
+from app.api.routes import (
+    analyses,
+    club,
+    comments,
+    health,
+    invites,
+    keys,
+    performers,
+    references,
+    session,
+)
 
 api_router = APIRouter()
 api_router.include_router(health.router)
@@ -11,4 +21,6 @@ api_router.include_router(keys.router)
 api_router.include_router(performers.router)
 api_router.include_router(references.router)
 api_router.include_router(analyses.router)
+api_router.include_router(comments.router)
+api_router.include_router(invites.router)
 api_router.include_router(session.router)

@@ -1,44 +1,48 @@
 import asyncio
 import json
 import logging
+import tempfile
 import time
 import uuid
 from collections.abc import AsyncIterator
 from datetime import datetime
+from pathlib import Path
 from typing import Annotated, Any
 
-import numpy as np
 from fastapi import APIRouter, File, Form, Header, Query, Request, Response, UploadFile
 from fastapi.concurrency import run_in_threadpool
-from fastapi.responses import FileResponse, StreamingResponse
+from fastapi.responses import FileResponse, PlainTextResponse, StreamingResponse
 from sqlalchemy.exc import IntegrityError
+from starlette.background import BackgroundTask
 
 from app import crud
+from app.api.access import analysis_for, done_analysis, reference_for, result_of
 from app.api.deps import (
-    CurrentClub,
+    CurrentCoach,
+    CurrentPrincipal,
     NotifierDep,
     PageDep,
+    Principal,
     QueueDep,
     SessionDep,
     SettingsDep,
     StorageDep,
 )
 from app.api.errors import ApiError, errors, not_found
-from app.core import validation
+from app.core import media, summary, validation
 from app.core.queue import QueueUnavailable, analysis_job
 from app.core.reflect import reflect
 from app.core.storage import Storage, UploadTooLarge
-from app.models import TERMINAL_STATES, Analysis, Club
+from app.models import TERMINAL_STATES, Analysis
 from app.schemas import (
     AnalysesPublic,
     AnalysisPublic,
     AnalysisState,
-    SegmentPublic,
     SegmentsPublic,
 )
-from engine.body.skeleton import BONE_CHILD, BONE_NAMES, BONE_PARENT
 from engine.errors import InvalidInput
 from engine.report import ONE_CAMERA_NOTE
+from worker.contract import AnalysisFolder
 
 log = logging.getLogger("app.analyses")
 
@@ -53,17 +57,6 @@ IdempotencyKey = Annotated[
         description="Retrying an upload with the same key returns the same analysis (200).",
     ),
 ]
-
-
-def _get(session, club: Club, analysis_id: str) -> Analysis:
-    try:
-        uuid.UUID(analysis_id)
-    except ValueError:
-        raise not_found("analysis", analysis_id) from None
-    analysis = crud.get_analysis(session, club_id=club.id, analysis_id=analysis_id)
-    if analysis is None:
-        raise not_found("analysis", analysis_id)
-    return analysis
 
 
 def _public(analysis: Analysis) -> AnalysisPublic:
@@ -85,16 +78,20 @@ def _public(analysis: Analysis) -> AnalysisPublic:
 )
 async def create_analysis(
     response: Response,
-    club: CurrentClub,
+    who: CurrentPrincipal,
     session: SessionDep,
     settings: SettingsDep,
     storage: StorageDep,
     queue: QueueDep,
     video: Annotated[UploadFile, File(description="The performer's video.")],
     reference_id: Annotated[int, Form(ge=1)],
-    performer_id: Annotated[int, Form(ge=1)],
+    performer_id: Annotated[
+        int | None, Form(ge=1, description="Whom the video shows (a performer: themselves).")
+    ] = None,
     idempotency_key: IdempotencyKey = None,
 ):
+    club = who.club
+    performer_id = _performer_shown(who, performer_id)
     if idempotency_key is not None:
         existing = crud.get_analysis_by_idempotency_key(
             session, club_id=club.id, key=idempotency_key
@@ -102,9 +99,7 @@ async def create_analysis(
         if existing is not None:
             response.status_code = 200
             return existing
-    reference = crud.get_reference(session, club_id=club.id, reference_id=reference_id)
-    if reference is None:
-        raise not_found("reference", reference_id)
+    reference = reference_for(session, who, reference_id)
     if crud.get_performer(session, club_id=club.id, user_id=performer_id) is None:
         raise not_found("performer", performer_id)
 
@@ -125,7 +120,7 @@ async def create_analysis(
             info = await run_in_threadpool(validation.probe_video, upload, settings)
         except InvalidInput as exc:
             raise ApiError(422, "invalid_video", str(exc)) from None
-        video_path = storage.move(upload, work_dir / f"video{suffix}")
+        video_path = storage.move(upload, AnalysisFolder(work_dir).video(suffix))
         analysis = Analysis(
             id=analysis_id,
             club_id=club.id,
@@ -170,9 +165,22 @@ async def create_analysis(
         Storage.remove(tmp)
 
 
-@router.get("", response_model=AnalysesPublic, summary="The club's analyses, newest first")
+def _performer_shown(who: Principal, performer_id: int | None) -> int:
+    """Whom an upload shows: a performer uploads for themselves; a coach and an API key
+    name the performer."""
+    if who.own_performer_id is not None:
+        return who.own_performer_id
+    if performer_id is None or (who.user is not None and performer_id == who.user.id):
+        raise ApiError(422, "invalid_request", "choose the performer this video shows")
+    return performer_id
+
+
+@router.get(
+    "", response_model=AnalysesPublic,
+    summary="The club's analyses (a performer's own), newest first",
+)  # fmt: skip
 def list_analyses(
-    club: CurrentClub,
+    who: CurrentPrincipal,
     session: SessionDep,
     page: PageDep,
     notifier: NotifierDep,
@@ -182,12 +190,15 @@ def list_analyses(
     created_after: Annotated[datetime | None, Query()] = None,
     created_before: Annotated[datetime | None, Query()] = None,
 ):
+    own = who.own_performer_id
+    if own is not None and performer_id not in (None, own):
+        return AnalysesPublic(items=[], total=0, limit=page.limit, offset=page.offset)
     items, total = crud.list_analyses(
         session,
-        club_id=club.id,
+        club_id=who.club.id,
         limit=page.limit,
         offset=page.offset,
-        performer_id=performer_id,
+        performer_id=own or performer_id,
         reference_id=reference_id,
         status=status,
         created_after=created_after,
@@ -204,20 +215,11 @@ def list_analyses(
     "/{analysis_id}", response_model=AnalysisPublic, summary="Status and progress",
     responses=errors(404),
 )  # fmt: skip
-def read_analysis(analysis_id: str, club: CurrentClub, session: SessionDep, notifier: NotifierDep):
-    analysis = _get(session, club, analysis_id)
+def read_analysis(
+    analysis_id: str, who: CurrentPrincipal, session: SessionDep, notifier: NotifierDep
+):
+    analysis = analysis_for(session, who, analysis_id)
     reflect(session, analysis, on_final=notifier)
-    return analysis
-
-
-def _done(session, club: Club, analysis_id: str, notifier) -> Analysis:
-    analysis = _get(session, club, analysis_id)
-    reflect(session, analysis, on_final=notifier)
-    if analysis.status != "done" or not analysis.result_path:
-        raise ApiError(
-            409, "not_ready", f"analysis {analysis_id} is {analysis.status}, not done",
-            {"status": analysis.status, "progress": analysis.progress},
-        )  # fmt: skip
     return analysis
 
 
@@ -227,67 +229,11 @@ def _done(session, club: Club, analysis_id: str, notifier) -> Analysis:
     description=ONE_CAMERA_NOTE,
     responses={200: {"content": {"application/json": {}}}} | errors(404, 409),
 )
-def read_result(analysis_id: str, club: CurrentClub, session: SessionDep, notifier: NotifierDep):
-    analysis = _done(session, club, analysis_id, notifier)
+def read_result(
+    analysis_id: str, who: CurrentPrincipal, session: SessionDep, notifier: NotifierDep
+):
+    analysis = done_analysis(session, who, analysis_id, notifier)
     return FileResponse(analysis.result_path, media_type="application/json")
-
-
-def misfit_bones(frames: list[dict[str, Any]], height: float) -> list[str]:
-    """Up to two bones whose picture differs most between the reported posture and the one
-    that fits the video best, over ``image_misfit`` frames carrying ``image_best_joints_2d``.
-
-    Bone vectors are compared in pixels, so a shift of the whole body does not count; a bone
-    must differ by what a viewer notices (``height`` / 80, at least 3 px).
-    """
-    pairs = [(f["joints_2d"], f["image_best_joints_2d"]) for f in frames
-             if f.get("image_best_joints_2d") and f.get("joints_2d")]  # fmt: skip
-    if not pairs:
-        return []
-    p, g = (np.asarray(x, float) for x in zip(*pairs, strict=True))  # (k, 17, 2) each
-    diff = (g[:, BONE_CHILD] - g[:, BONE_PARENT]) - (p[:, BONE_CHILD] - p[:, BONE_PARENT])
-    d = np.linalg.norm(diff, axis=-1).mean(0)  # (16,)
-    px = max(3.0, height / 80)
-    return [BONE_NAMES[b] for b in np.argsort(-d)[:2] if d[b] >= px]
-
-
-def summarise_segments(result: dict[str, Any]) -> list[SegmentPublic]:
-    out = []
-    misfit = [
-        f for f in result.get("frames") or [] if "image_misfit" in (f.get("flags") or ())
-    ]
-    height = float((result.get("video") or {}).get("height") or 0)
-    for i, seg in enumerate(result.get("segments") or []):
-        inside = [f for f in misfit if seg["performer_start"] <= f["t"] <= seg["performer_end"]]
-        bones = [float(e) for e in seg.get("bone_mean_errors_deg") or []]
-        named = dict(zip(BONE_NAMES, bones, strict=False))
-        worst = max(named, key=named.__getitem__) if named else None
-        ref_len = seg["reference_end"] - seg["reference_start"]
-        perf_len = seg["performer_end"] - seg["performer_start"]
-        ref_fps = float((result.get("reference") or {}).get("fps") or 0)
-        vid_fps = float((result.get("video") or {}).get("fps") or 0)
-        tempo = None
-        if ref_len > 0 and ref_fps > 0 and vid_fps > 0:
-            tempo = (perf_len / vid_fps) / (ref_len / ref_fps)
-        out.append(
-            SegmentPublic(
-                index=i,
-                reference_start=seg["reference_start"],
-                reference_end=seg["reference_end"],
-                performer_start=seg["performer_start"],
-                performer_end=seg["performer_end"],
-                tempo_ratio=tempo,
-                mean_error_deg=float(seg.get("mean_error_deg", 0.0)),
-                worst_bone=worst,
-                worst_bone_error_deg=named[worst] if worst else None,
-                bone_mean_errors_deg=named,
-                misfit_frames=len(inside),
-                misfit_bones=misfit_bones(inside, height),
-                bone_uncertainty_deg=dict(
-                    zip(BONE_NAMES, seg.get("bone_uncertainty_deg", []), strict=False)
-                ),
-            )
-        )
-    return out
 
 
 @router.get(
@@ -297,16 +243,67 @@ def summarise_segments(result: dict[str, Any]) -> list[SegmentPublic]:
     description=ONE_CAMERA_NOTE,
     responses=errors(404, 409),
 )
-def read_segments(analysis_id: str, club: CurrentClub, session: SessionDep, notifier: NotifierDep):
-    analysis = _done(session, club, analysis_id, notifier)
-    result = Storage.read_json(analysis.result_path)
-    if result is None:
-        raise ApiError(409, "not_ready", "the result file cannot be read yet")
-    try:
-        segments = summarise_segments(result)
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ApiError(500, "bad_result", f"the result has malformed segments ({exc})") from None
+def read_segments(
+    analysis_id: str, who: CurrentPrincipal, session: SessionDep, notifier: NotifierDep
+):
+    analysis = done_analysis(session, who, analysis_id, notifier)
+    segments = summary.segments_or_error(result_of(analysis))
     return SegmentsPublic(analysis_id=analysis.id, segments=segments)
+
+
+@router.get(
+    "/{analysis_id}/summary",
+    summary="What the result page shows: named segments with tempo, score and worst bones",
+    description=ONE_CAMERA_NOTE,
+    responses=errors(404, 409),
+)
+def read_summary(
+    analysis_id: str, who: CurrentPrincipal, session: SessionDep, notifier: NotifierDep
+) -> dict[str, Any]:
+    analysis = done_analysis(session, who, analysis_id, notifier)
+    return summary.page_summary(analysis, result_of(analysis))
+
+
+@router.get(
+    "/{analysis_id}/video.mp4", summary="The performer's video, converted to play in browsers",
+    responses={200: {"content": {"video/mp4": {}}}} | errors(404, 422),
+)  # fmt: skip
+async def read_video(analysis_id: str, who: CurrentPrincipal, session: SessionDep):
+    a = analysis_for(session, who, analysis_id)
+    try:
+        path = await run_in_threadpool(media.playable_video, a.video_path, a.work_dir)
+    except Exception as exc:  # a broken upload: say so instead of a 500 page
+        raise ApiError(422, "invalid_video", f"the video cannot be converted ({exc})") from None
+    return FileResponse(path, media_type="video/mp4")
+
+
+@router.get(
+    "/{analysis_id}/export.csv", summary="Per-frame errors and joint angles as CSV",
+    responses={200: {"content": {"text/csv": {}}}} | errors(404, 409),
+)  # fmt: skip
+def export_csv(analysis_id: str, who: CurrentPrincipal, session: SessionDep, notifier: NotifierDep):
+    a = done_analysis(session, who, analysis_id, notifier)
+    return PlainTextResponse(
+        media.result_csv(result_of(a)), media_type="text/csv",
+        headers={"Content-Disposition": f'attachment; filename="analysis-{a.id[:8]}.csv"'},
+    )  # fmt: skip
+
+
+@router.get(
+    "/{analysis_id}/export.bvh", summary="The performer's motion as BVH",
+    responses={200: {"content": {"application/octet-stream": {}}}} | errors(404, 409),
+)  # fmt: skip
+async def export_bvh(
+    analysis_id: str, who: CurrentPrincipal, session: SessionDep, notifier: NotifierDep
+):
+    a = done_analysis(session, who, analysis_id, notifier)
+    result = result_of(a)
+    tmp = Path(tempfile.mkdtemp(prefix="coach-bvh-"))
+    path = await run_in_threadpool(media.result_bvh, result, tmp / "performer.bvh")
+    return FileResponse(
+        path, media_type="application/octet-stream", filename=f"performer-{a.id[:8]}.bvh",
+        background=BackgroundTask(Storage.remove, tmp),
+    )  # fmt: skip
 
 
 def _revoke(queue, analysis: Analysis) -> None:
@@ -322,10 +319,10 @@ def _revoke(queue, analysis: Analysis) -> None:
     responses=errors(404, 409),
 )  # fmt: skip
 def cancel_analysis(
-    analysis_id: str, club: CurrentClub, session: SessionDep, queue: QueueDep,
+    analysis_id: str, who: CurrentPrincipal, session: SessionDep, queue: QueueDep,
     notifier: NotifierDep,
 ):  # fmt: skip
-    analysis = _get(session, club, analysis_id)
+    analysis = analysis_for(session, who, analysis_id)
     reflect(session, analysis, on_final=notifier)
     if analysis.status in TERMINAL_STATES:
         raise ApiError(
@@ -344,10 +341,10 @@ def cancel_analysis(
     responses=errors(404),
 )  # fmt: skip
 def delete_analysis(
-    analysis_id: str, club: CurrentClub, session: SessionDep, storage: StorageDep,
+    analysis_id: str, who: CurrentCoach, session: SessionDep, storage: StorageDep,
     queue: QueueDep,
 ) -> Response:  # fmt: skip
-    analysis = _get(session, club, analysis_id)
+    analysis = analysis_for(session, who, analysis_id)
     if analysis.status not in TERMINAL_STATES:
         _revoke(queue, analysis)
     work_dir = analysis.work_dir
@@ -369,14 +366,14 @@ def delete_analysis(
 async def analysis_events(
     analysis_id: str,
     request: Request,
-    club: CurrentClub,
+    who: CurrentPrincipal,
     session: SessionDep,
     settings: SettingsDep,
     notifier: NotifierDep,
 ) -> StreamingResponse:
-    _get(session, club, analysis_id)
+    analysis_for(session, who, analysis_id)
     sessions = request.app.state.sessionmaker
-    club_id = club.id
+    club_id = who.club.id
 
     def snapshot() -> dict | None:
         with sessions() as s:

@@ -1,15 +1,15 @@
 from fastapi import APIRouter
 
 from app import crud
-from app.api.deps import CurrentClub, SessionDep
+from app.api.deps import CoachClub, SessionDep
 from app.api.errors import errors
 from app.schemas import ClubPublic, ClubUpdate, ClubUpdated
 
 router = APIRouter(prefix="/club", tags=["club"], responses=errors(401, 429))
 
 
-@router.get("", response_model=ClubPublic, summary="The API key's club")
-def read_club(club: CurrentClub) -> ClubPublic:
+@router.get("", response_model=ClubPublic, summary="The caller's club")
+def read_club(club: CoachClub) -> ClubPublic:
     return ClubPublic.model_validate(club)
 
 
@@ -24,7 +24,7 @@ def read_club(club: CurrentClub) -> ClubPublic:
     ),
     responses=errors(422),
 )
-def update_club(club: CurrentClub, body: ClubUpdate, session: SessionDep) -> ClubUpdated:
+def update_club(club: CoachClub, body: ClubUpdate, session: SessionDep) -> ClubUpdated:
     secret = crud.update_club(
         session,
         club,

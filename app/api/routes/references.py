@@ -4,13 +4,22 @@ from typing import Annotated
 
 from fastapi import APIRouter, File, Form, Response, UploadFile
 from fastapi.concurrency import run_in_threadpool
+from fastapi.responses import JSONResponse
 
 from app import crud
-from app.api.deps import CurrentClub, PageDep, SessionDep, SettingsDep, StorageDep
-from app.api.errors import ApiError, errors, not_found
-from app.core import validation
+from app.api.access import reference_for
+from app.api.deps import (
+    CurrentCoach,
+    CurrentPrincipal,
+    PageDep,
+    SessionDep,
+    SettingsDep,
+    StorageDep,
+)
+from app.api.errors import ApiError, errors
+from app.core import media, validation
 from app.core.storage import Storage, UploadTooLarge
-from app.schemas import ReferencePublic
+from app.schemas import DomainUpdate, ReferencePublic
 from engine.errors import InvalidInput
 
 router = APIRouter(prefix="/references", tags=["references"], responses=errors(401, 429))
@@ -42,7 +51,7 @@ def too_large(what: str, limit: int) -> ApiError:
     responses=errors(413, 422),
 )
 async def create_reference(
-    club: CurrentClub,
+    who: CurrentCoach,
     session: SessionDep,
     settings: SettingsDep,
     storage: StorageDep,
@@ -74,14 +83,9 @@ async def create_reference(
         except InvalidInput as exc:
             raise ApiError(422, "invalid_reference", str(exc)) from None
         label = name or (Path(file.filename or "").stem[:200] or "reference")
-        ref = crud.create_reference(session, club_id=club.id, name=label)
+        ref = crud.create_reference(session, club_id=who.club.id, name=label)
         final_dir = storage.reference_dir(ref.id)
         ref.bvh_path = str(storage.move(bvh, final_dir / "reference.bvh"))
-        if domain_config is not None:
-            # Beside the BVH under the name the engine looks for (engine.reference.domain).
-            domain_file = final_dir / "reference.domain.json"
-            domain_file.write_text(json.dumps(validation.engine_domain(domain_config)))
-            ref.domain_path = str(domain_file)
         ref.domain_config = domain_config
         ref.derived = derived
         session.commit()
@@ -95,31 +99,102 @@ async def create_reference(
 
 
 @router.get("", response_model=list[ReferencePublic], summary="The club's references")
-def list_references(club: CurrentClub, session: SessionDep, page: PageDep):
-    return crud.list_references(session, club_id=club.id, limit=page.limit, offset=page.offset)
+def list_references(who: CurrentPrincipal, session: SessionDep, page: PageDep):
+    return crud.list_references(session, club_id=who.club.id, limit=page.limit, offset=page.offset)
 
 
 @router.get(
     "/{reference_id}", response_model=ReferencePublic, summary="One reference",
     responses=errors(404),
 )  # fmt: skip
-def read_reference(reference_id: int, club: CurrentClub, session: SessionDep):
-    ref = crud.get_reference(session, club_id=club.id, reference_id=reference_id)
-    if ref is None:
-        raise not_found("reference", reference_id)
+def read_reference(reference_id: int, who: CurrentPrincipal, session: SessionDep):
+    return reference_for(session, who, reference_id)
+
+
+@router.put(
+    "/{reference_id}/domain", response_model=ReferencePublic,
+    summary="Set the coach's segment names, bone weights and tolerances (and the name)",
+    responses=errors(403, 404, 422),
+)  # fmt: skip
+def update_domain(
+    reference_id: int, body: DomainUpdate, who: CurrentCoach, session: SessionDep
+):  # fmt: skip
+    ref = reference_for(session, who, reference_id)
+    config = dict(ref.domain_config or {})
+    config.update(
+        segment_names=[s.strip() for s in body.segment_names],
+        bone_weights=body.bone_weights,
+        tolerances_deg=body.tolerances_deg,
+        default_tolerance_deg=body.default_tolerance_deg,
+    )
+    try:
+        config = validation.parse_domain(json.dumps(config).encode())
+    except InvalidInput as exc:
+        raise ApiError(422, "invalid_domain", str(exc)) from None
+    n = len((ref.derived or {}).get("segments") or []) - 1  # boundaries: n + 1 frames
+    if config["segment_names"] and n > 0 and len(config["segment_names"]) != n:
+        raise ApiError(
+            422, "invalid_domain",
+            f"the reference has {n} segments, got {len(config['segment_names'])} names",
+        )  # fmt: skip
+    ref.domain_config = config
+    if body.name:
+        ref.name = body.name
+    session.commit()
     return ref
+
+
+_PICTURE_HEADERS = {"Cache-Control": "private, max-age=300"}
+
+
+@router.get(
+    "/{reference_id}/thumbnail.svg", summary="The first posture, drawn",
+    responses={200: {"content": {"image/svg+xml": {}}}} | errors(404),
+)  # fmt: skip
+async def reference_thumbnail(reference_id: int, who: CurrentPrincipal, session: SessionDep):
+    ref = reference_for(session, who, reference_id)
+    first = int((ref.derived or {}).get("first_motion_frame") or 0)
+    svg = await run_in_threadpool(media.reference_thumbnail, ref.bvh_path, first)
+    return Response(svg, media_type="image/svg+xml", headers=_PICTURE_HEADERS)
+
+
+@router.get(
+    "/{reference_id}/strip.svg", summary="One posture per segment, drawn",
+    responses={200: {"content": {"image/svg+xml": {}}}} | errors(404),
+)  # fmt: skip
+async def reference_strip(reference_id: int, who: CurrentPrincipal, session: SessionDep):
+    ref = reference_for(session, who, reference_id)
+    derived = ref.derived or {}
+    svg = await run_in_threadpool(
+        media.reference_strip, ref.bvh_path, list(derived.get("segments") or []),
+        int(derived.get("first_motion_frame") or 0),
+    )  # fmt: skip
+    return Response(svg, media_type="image/svg+xml", headers=_PICTURE_HEADERS)
+
+
+@router.get(
+    "/{reference_id}/preview.json",
+    summary="Sampled postures (front and side view) for a looping preview",
+    responses=errors(404),
+)
+async def reference_preview(reference_id: int, who: CurrentPrincipal, session: SessionDep):
+    ref = reference_for(session, who, reference_id)
+    derived = ref.derived or {}
+    data = await run_in_threadpool(
+        media.reference_preview, ref.bvh_path, int(derived.get("first_motion_frame") or 0),
+        fps=float(derived.get("fps") or 0.0),
+    )  # fmt: skip
+    return JSONResponse(data, headers=_PICTURE_HEADERS)
 
 
 @router.delete(
     "/{reference_id}", status_code=204, summary="Delete a reference no analysis uses",
-    responses=errors(404, 409),
+    responses=errors(403, 404, 409),
 )  # fmt: skip
 def delete_reference(
-    reference_id: int, club: CurrentClub, session: SessionDep, storage: StorageDep
+    reference_id: int, who: CurrentCoach, session: SessionDep, storage: StorageDep
 ) -> Response:
-    ref = crud.get_reference(session, club_id=club.id, reference_id=reference_id)
-    if ref is None:
-        raise not_found("reference", reference_id)
+    ref = reference_for(session, who, reference_id)
     if crud.reference_in_use(session, ref):
         raise ApiError(
             409, "conflict", f"reference {reference_id} is used by analyses; delete them first"

@@ -1,0 +1,123 @@
+"""What the API and the pages say about a result: per-segment tempo, worst bones, names.
+
+The engine's result document (DESIGN.md) holds per-frame and per-segment numbers; this turns
+them into what a coach reads: each segment's tempo against the reference, its worst bones
+with how sure they are, and the segment's name from the reference's domain.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from app.api.errors import ApiError
+from app.models import Analysis, Reference
+from app.schemas import SegmentPublic
+from engine.body.skeleton import BONE_CHILD, BONE_NAMES, BONE_PARENT
+from engine.errors import InvalidInput
+from engine.io.result_reader import Result, ResultFrame, ResultSegment, as_result
+
+
+def misfit_bones(frames: Sequence[ResultFrame], height: float) -> list[str]:
+    """Up to two bones whose picture differs most between the reported posture and the one
+    that fits the video best, over ``image_misfit`` frames carrying ``image_best_joints_2d``.
+
+    Bone vectors are compared in pixels, so a shift of the whole body does not count; a bone
+    must differ by what a viewer notices (``height`` / 80, at least 3 px).
+    """
+    pairs = [(f.joints_2d, f.image_best_joints_2d) for f in frames
+             if f.image_best_joints_2d is not None]  # fmt: skip
+    if not pairs:
+        return []
+    p, g = (np.stack(x) for x in zip(*pairs, strict=True))  # (k, 17, 2) each
+    diff = (g[:, BONE_CHILD] - g[:, BONE_PARENT]) - (p[:, BONE_CHILD] - p[:, BONE_PARENT])
+    d = np.linalg.norm(diff, axis=-1).mean(0)  # (16,)
+    px = max(3.0, height / 80)
+    return [BONE_NAMES[b] for b in np.argsort(-d)[:2] if d[b] >= px]
+
+
+def _tempo(seg: ResultSegment, ref_fps: float, vid_fps: float) -> float | None:
+    """The performer's duration of a segment over the reference's (1 = as the expert)."""
+    ref_len = seg.reference_end - seg.reference_start
+    perf_len = seg.performer_end - seg.performer_start
+    if ref_len > 0 and ref_fps > 0 and vid_fps > 0:
+        return (perf_len / vid_fps) / (ref_len / ref_fps)
+    return None
+
+
+def _by_bone(values: np.ndarray | None) -> dict[str, float]:
+    return {} if values is None else dict(zip(BONE_NAMES, map(float, values), strict=False))
+
+
+def summarise_segments(result: Result | Mapping[str, Any]) -> list[SegmentPublic]:
+    """One summary per reference segment of a result.
+
+    Raises
+    ------
+    InvalidInput
+        A malformed result document.
+    """
+    r = as_result(result)
+    misfit = [f for f in r.frames if "image_misfit" in f.flags]
+    out = []
+    for i, seg in enumerate(r.segments):
+        inside = [f for f in misfit if seg.performer_start <= f.t <= seg.performer_end]
+        named = _by_bone(seg.bone_mean_errors_deg)
+        worst = max(named, key=named.__getitem__) if named else None
+        out.append(
+            SegmentPublic(
+                index=i,
+                reference_start=seg.reference_start,
+                reference_end=seg.reference_end,
+                performer_start=seg.performer_start,
+                performer_end=seg.performer_end,
+                tempo_ratio=_tempo(seg, r.reference.fps, r.video.fps),
+                mean_error_deg=seg.mean_error_deg,
+                worst_bone=worst,
+                worst_bone_error_deg=named[worst] if worst else None,
+                bone_mean_errors_deg=named,
+                misfit_frames=len(inside),
+                misfit_bones=misfit_bones(inside, float(r.video.height)),
+                bone_uncertainty_deg=_by_bone(seg.bone_uncertainty_deg),
+            )
+        )
+    return out
+
+
+def segments_or_error(result: Result) -> list[SegmentPublic]:
+    """:func:`summarise_segments`, or a 500 ``bad_result`` naming what is malformed."""
+    try:
+        return summarise_segments(result)
+    except InvalidInput as exc:
+        raise ApiError(500, "bad_result", f"the result is malformed ({exc})") from None
+
+
+def segment_names(ref: Reference, n: int) -> list[str]:
+    """The coach's names of a reference's ``n`` segments ("segment i" where unnamed)."""
+    names = list(((ref.domain_config or {}).get("segment_names")) or [])
+    return [names[i] if i < len(names) else f"segment {i + 1}" for i in range(n)]
+
+
+def page_summary(analysis: Analysis, result: Result) -> dict[str, Any]:
+    """Segments with names, tempo, score and worst bones, plus what the page header shows."""
+    segments = segments_or_error(result)
+    names = segment_names(analysis.reference, len(segments))
+    coach_named = bool((analysis.reference.domain_config or {}).get("segment_names"))
+    out = []
+    for s, raw, name in zip(segments, result.segments, names, strict=True):
+        d = s.model_dump()
+        d["name"] = name if coach_named else (raw.name or name)
+        # (bone, mean error, width of its range over the candidates the video cannot tell
+        # apart, or None for results that predate it)
+        worst = sorted(s.bone_mean_errors_deg.items(), key=lambda kv: -kv[1])[:3]
+        d["worst_bones"] = [(b, e, s.bone_uncertainty_deg.get(b)) for b, e in worst]
+        d["score"] = s.mean_error_deg if raw.score_deg is None else raw.score_deg
+        out.append(d)
+    return {
+        "analysis_id": analysis.id,
+        "reference": analysis.reference.name,
+        "performer": analysis.performer.display_name,
+        "segments": out,
+    }
