@@ -176,6 +176,50 @@ def _error_plot_png(result: Result | Mapping[str, Any]) -> str:
     return base64.b64encode(buf.getvalue()).decode("ascii")
 
 
+def _strip_html(
+    result: Result, video_frames: np.ndarray | Sequence[np.ndarray] | None, n: int
+) -> str:
+    """The contact strip: ``n`` frames with their skeletons coloured by error."""
+    w, h = result.video.width, result.video.height
+    out = []
+    for i in _strip_frames(result, n):
+        f = result.frames[i]
+        img = (
+            np.asarray(video_frames[i], np.uint8)
+            if video_frames is not None and i < len(video_frames)
+            else np.full((h, w, 3), 60, np.uint8)
+        )
+        drawn = draw_skeleton(img, f.joints_2d, f.bone_errors_deg, f.image_best_joints_2d)
+        cap = f"t'={f.t} &rarr; t={f.reference_frame}, {f.posture_error_deg:.1f}&deg;"
+        out.append(
+            f'<figure><img alt="frame {f.t}" src="data:image/png;base64,{_png_b64(drawn)}">'
+            f"<figcaption>{cap}</figcaption></figure>"
+        )
+    return "".join(out)
+
+
+def _segment_rows(result: Result) -> str:
+    """One table row per segment: frames, tempo, errors, status and its worst bones."""
+    e = html.escape
+    rows = []
+    for j, s in enumerate(result.segments):
+        worst = ", ".join(
+            f"{e(BONE_NAMES[b])} ({s.bone_mean_errors_deg[b]:.0f}&deg;)"
+            for b in np.argsort(-s.bone_mean_errors_deg)[:3]
+        )
+        status = s.status or "ok"
+        score = "&ndash;" if s.score_deg is None else f"{s.score_deg:.1f}"
+        tempo = float("nan") if s.tempo is None else s.tempo
+        rows.append(
+            f"<tr class='{e(status)}'><td>{e(str(j + 1) if s.name is None else s.name)}</td>"
+            f"<td>{s.reference_start}&ndash;{s.reference_end}</td>"
+            f"<td>{s.performer_start}&ndash;{s.performer_end}</td>"
+            f"<td>{tempo:.2f}</td><td>{s.mean_error_deg:.1f}</td>"
+            f"<td>{score}</td><td>{e(status)}</td><td>{worst}</td></tr>"
+        )
+    return "".join(rows)
+
+
 def build_report_html(
     result: Result | Mapping[str, Any],
     video_frames: np.ndarray | Sequence[np.ndarray] | None = None,
@@ -204,40 +248,12 @@ def build_report_html(
     InvalidInput
         ``result`` is not a result document.
     """
-    e = html.escape
     result = as_result(result)
     frames = result.frames
-    w, h = result.video.width, result.video.height
-    strip = []
-    for i in _strip_frames(result, strip_frames):
-        f = frames[i]
-        img = (
-            np.asarray(video_frames[i], np.uint8)
-            if video_frames is not None and i < len(video_frames)
-            else np.full((h, w, 3), 60, np.uint8)
-        )
-        drawn = draw_skeleton(img, f.joints_2d, f.bone_errors_deg, f.image_best_joints_2d)
-        cap = f"t'={f.t} &rarr; t={f.reference_frame}, {f.posture_error_deg:.1f}&deg;"
-        strip.append(
-            f'<figure><img alt="frame {f.t}" src="data:image/png;base64,{_png_b64(drawn)}">'
-            f"<figcaption>{cap}</figcaption></figure>"
-        )
-    rows = []
-    for j, s in enumerate(result.segments):
-        worst = ", ".join(
-            f"{e(BONE_NAMES[b])} ({s.bone_mean_errors_deg[b]:.0f}&deg;)"
-            for b in np.argsort(-s.bone_mean_errors_deg)[:3]
-        )
-        status = s.status or "ok"
-        score = "&ndash;" if s.score_deg is None else f"{s.score_deg:.1f}"
-        tempo = float("nan") if s.tempo is None else s.tempo
-        rows.append(
-            f"<tr class='{e(status)}'><td>{e(str(j + 1) if s.name is None else s.name)}</td>"
-            f"<td>{s.reference_start}&ndash;{s.reference_end}</td>"
-            f"<td>{s.performer_start}&ndash;{s.performer_end}</td>"
-            f"<td>{tempo:.2f}</td><td>{s.mean_error_deg:.1f}</td>"
-            f"<td>{score}</td><td>{e(status)}</td><td>{worst}</td></tr>"
-        )
+    w = result.video.width
+    strip = _strip_html(result, video_frames, strip_frames)
+    rows = _segment_rows(result)
+    e = html.escape
     summary = result.summary
     messages = "".join(f"<p class='msg'>{e(m)}</p>" for m in summary.messages)
     timing = ", ".join(f"{e(k)} {v:.2f} s" for k, v in result.timing_s.items())
@@ -277,11 +293,11 @@ tr.missing td,tr.extra_motion td{{background:#fde2e2}} .msg{{color:#a00;font-wei
 <p class="note">{e(ONE_CAMERA_NOTE)}</p>
 {messages}
 <h2>Frames</h2><div class="legend">bone error: {legend}</div>
-<div class="strip">{"".join(strip)}</div>
+<div class="strip">{strip}</div>
 <h2>Posture error over time</h2>
 <img alt="posture error" src="data:image/png;base64,{_error_plot_png(result)}">
 <h2>Segments</h2>
-<table><tr>{columns}</tr>{"".join(rows)}</table>
+<table><tr>{columns}</tr>{rows}</table>
 <p><small>Timing: {timing}</small></p>
 </body></html>
 """

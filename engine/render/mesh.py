@@ -228,39 +228,11 @@ class MeshRenderer:
         """
         if self._renderer is None:
             raise InvalidInput("renderer is closed")
-        joints = np.asarray(joints, dtype=float)
-        if joints.shape != (17, 3) or not np.all(np.isfinite(joints)):
-            raise InvalidInput(f"joints must be finite with shape (17, 3), got {joints.shape}")
-        if (camera.width, camera.height) != (self.width, self.height):
-            raise InvalidInput(
-                f"camera is {camera.width}x{camera.height} but the renderer is "
-                f"{self.width}x{self.height}"
-            )
+        joints = self._check(joints, camera, background)
         H, W = self.height, self.width
-        if background is not None:
-            background = np.asarray(background)
-            if background.shape != (H, W, 3):
-                raise InvalidInput(
-                    f"background must have shape {(H, W, 3)}, got {background.shape}"
-                )
-
         scene = pyrender.Scene(bg_color=[0.0, 0.0, 0.0, 0.0], ambient_light=[0.35, 0.35, 0.35])
-        ends = capsule_endpoints(joints)  # (C, 2, 3)
         radii = np.asarray(shape.radii, dtype=float)
-        # the body's facing (for the back of the head): horizontal normal of the hip line
-        across = joints[1] - joints[4]
-        front = np.cross(across, [0.0, 1.0, 0.0])
-        for c in range(N_CAPSULES):
-            a, b = ends[c]
-            pose = _pose_from_segment(a, b)
-            if CAPSULE_PART[c] == PART_INDEX["head"] and np.linalg.norm(front) > 1e-9:
-                z = pose[:3, 2]
-                y = front - z * (front @ z)
-                if np.linalg.norm(y) > 1e-6:
-                    y /= np.linalg.norm(y)
-                    pose[:3, 1], pose[:3, 0] = y, np.cross(y, z)
-            scene.add(self._mesh(c, float(radii[c]), float(np.linalg.norm(b - a))), pose=pose)
-
+        self._add_body(scene, joints, radii)
         depths = camera.depth(joints)
         near = float(depths.min()) - 2.0 - float(radii.max())
         far_extent = float(depths.max() - near) + 2.0 + float(radii.max())
@@ -284,6 +256,42 @@ class MeshRenderer:
             background = np.full((H, W, 3), 128, dtype=np.uint8)
         image = np.where(mask[..., None], colour[..., :3], background).astype(np.uint8)
         return image, mask
+
+    def _check(
+        self, joints: np.ndarray, camera: Camera, background: np.ndarray | None
+    ) -> np.ndarray:
+        """The joints (17, 3) as floats, after refusing what :meth:`render` cannot draw."""
+        joints = np.asarray(joints, dtype=float)
+        if joints.shape != (17, 3) or not np.all(np.isfinite(joints)):
+            raise InvalidInput(f"joints must be finite with shape (17, 3), got {joints.shape}")
+        if (camera.width, camera.height) != (self.width, self.height):
+            raise InvalidInput(
+                f"camera is {camera.width}x{camera.height} but the renderer is "
+                f"{self.width}x{self.height}"
+            )
+        shape = (self.height, self.width, 3)
+        if background is not None and np.asarray(background).shape != shape:
+            raise InvalidInput(
+                f"background must have shape {shape}, got {np.asarray(background).shape}"
+            )
+        return joints
+
+    def _add_body(self, scene: pyrender.Scene, joints: np.ndarray, radii: np.ndarray) -> None:
+        """One capsule mesh per body part; the head's turned to face the body's front."""
+        ends = capsule_endpoints(joints)  # (C, 2, 3)
+        # the body's facing (for the back of the head): horizontal normal of the hip line
+        across = joints[1] - joints[4]
+        front = np.cross(across, [0.0, 1.0, 0.0])
+        for c in range(N_CAPSULES):
+            a, b = ends[c]
+            pose = _pose_from_segment(a, b)
+            if CAPSULE_PART[c] == PART_INDEX["head"] and np.linalg.norm(front) > 1e-9:
+                z = pose[:3, 2]
+                y = front - z * (front @ z)
+                if np.linalg.norm(y) > 1e-6:
+                    y /= np.linalg.norm(y)
+                    pose[:3, 1], pose[:3, 0] = y, np.cross(y, z)
+            scene.add(self._mesh(c, float(radii[c]), float(np.linalg.norm(b - a))), pose=pose)
 
 
 def _rx(a: float) -> np.ndarray:

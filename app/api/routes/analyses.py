@@ -30,7 +30,8 @@ from app.api.deps import (
 )
 from app.api.errors import ApiError, errors, not_found
 from app.core import media, summary, validation
-from app.core.queue import QueueUnavailable, analysis_job
+from app.core.config import Settings
+from app.core.queue import JobQueue, QueueUnavailable, analysis_job
 from app.core.reflect import reflect
 from app.core.storage import Storage, UploadTooLarge
 from app.models import TERMINAL_STATES, Analysis
@@ -42,7 +43,7 @@ from app.schemas import (
 )
 from engine.errors import InvalidInput
 from engine.report import ONE_CAMERA_NOTE
-from worker.contract import AnalysisFolder
+from worker.contract import AnalysisFolder, AnalysisJob
 
 log = logging.getLogger("app.analyses")
 
@@ -109,17 +110,7 @@ async def create_analysis(
     work_dir = storage.analysis_dir(analysis_id)
     try:
         upload = tmp / f"video{suffix}"
-        try:
-            await storage.receive(video, upload, settings.max_video_bytes)
-        except UploadTooLarge as exc:
-            raise ApiError(
-                413, "too_large", f"the video is larger than the limit of {exc.limit} bytes",
-                {"limit_bytes": exc.limit},
-            ) from None  # fmt: skip
-        try:
-            info = await run_in_threadpool(validation.probe_video, upload, settings)
-        except InvalidInput as exc:
-            raise ApiError(422, "invalid_video", str(exc)) from None
+        info = await _receive_video(video, upload, storage, settings)
         video_path = storage.move(upload, AnalysisFolder(work_dir).video(suffix))
         analysis = Analysis(
             id=analysis_id,
@@ -147,14 +138,7 @@ async def create_analysis(
             response.status_code = 200
             return existing
         job = analysis_job(analysis, reference, settings.engine_preset)
-        try:
-            analysis.task_id = await run_in_threadpool(queue.enqueue, job)
-        except QueueUnavailable as exc:
-            session.delete(analysis)
-            session.commit()
-            raise ApiError(503, "queue_unavailable", str(exc)) from None
-        session.commit()
-        log.info("analysis.queued analysis=%s task=%s", analysis_id, analysis.task_id)
+        await _enqueue(session, queue, analysis, job)
         return analysis
     except BaseException:
         session.rollback()
@@ -163,6 +147,36 @@ async def create_analysis(
         raise
     finally:
         Storage.remove(tmp)
+
+
+async def _receive_video(
+    video: UploadFile, upload: Path, storage: Storage, settings: Settings
+) -> dict[str, Any]:
+    """Stream the upload to ``upload`` within the size limit and probe it: 413 when too
+    large, 422 when it is not a video the engine can read."""
+    try:
+        await storage.receive(video, upload, settings.max_video_bytes)
+    except UploadTooLarge as exc:
+        raise ApiError(
+            413, "too_large", f"the video is larger than the limit of {exc.limit} bytes",
+            {"limit_bytes": exc.limit},
+        ) from None  # fmt: skip
+    try:
+        return await run_in_threadpool(validation.probe_video, upload, settings)
+    except InvalidInput as exc:
+        raise ApiError(422, "invalid_video", str(exc)) from None
+
+
+async def _enqueue(session, queue: JobQueue, analysis: Analysis, job: AnalysisJob) -> None:
+    """Queue the analysis' job; a queue that cannot take it removes the row (503)."""
+    try:
+        analysis.task_id = await run_in_threadpool(queue.enqueue, job)
+    except QueueUnavailable as exc:
+        session.delete(analysis)
+        session.commit()
+        raise ApiError(503, "queue_unavailable", str(exc)) from None
+    session.commit()
+    log.info("analysis.queued analysis=%s task=%s", analysis.id, analysis.task_id)
 
 
 def _performer_shown(who: Principal, performer_id: int | None) -> int:
