@@ -97,3 +97,17 @@ def test_engine_io_imports_no_stage(layer):
             if m.startswith(("engine.stages", "engine.pipeline", "engine.synth"))
         }  # fmt: skip
         assert not above, f"{p.relative_to(REPO)} imports {sorted(above)}"
+
+
+@pytest.mark.parametrize(
+    ("package", "forbidden"),
+    [("app", ("web",)), ("worker", ("app", "web")), ("engine", ("app", "worker", "web"))],
+)
+def test_imports_point_down_only(package, forbidden):
+    """app -> worker -> engine, web -> app: no arrow goes back up (the web pages join the app
+    through declared entry points, not imports)."""
+    up = [
+        f"{p.relative_to(REPO)}: {m}" for p in _sources(package) for m in sorted(_imports(p))
+        if m.split(".")[0] in forbidden
+    ]  # fmt: skip
+    assert up == []
