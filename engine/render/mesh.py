@@ -3,7 +3,7 @@
 The body is drawn as the capsules of :mod:`engine.body.shapes`, smooth shaded, coloured per
 part (skin on the head and forearms, a shirt, trousers, shoes and hair painted as vertex
 colours so that the silhouette stays exactly that of the capsules). Keeping the visual mesh
-equal to the capsule model means the analytic rasteriser (``render/capsules.py``) and the
+equal to the capsule model means the analytic rasteriser (``render/capsules/``) and the
 synthetic videos agree up to mesh tessellation.
 
 The camera is pyrender's orthographic camera placed so that the pixel *centre* (u, v), with

@@ -119,7 +119,7 @@ def test_refinement_corrects_the_in_plane_angle():
     # PCA's angle is biased by whatever the region lacks (a leg) or has in excess; the
     # refinement must correct it, or the position settles off the truth to compensate
     from engine.body.kinematics import forward_kinematics
-    from engine.stages.calibration import _refine
+    from engine.stages.calibration.search import _refine
 
     shape = BodyShape.default(1.75)
     j = forward_kinematics(
@@ -194,7 +194,7 @@ def test_many_frames_outvote_one_faulty_frame():
     """A prop glued to the body's side in one frame drags a camera fitted to that frame
     alone; fitted to eight frames of which that is one, the camera stays near the truth."""
     from engine.io.bvh import load_reference
-    from engine.stages.calibration import _refine, refine_on_frames
+    from engine.stages.calibration.search import _refine, refine_on_frames
 
     ref = load_reference(CMU / "64_29.bvh")
     postures = ref.motion.joints[np.linspace(1, ref.motion.frames - 1, 8).astype(int)]

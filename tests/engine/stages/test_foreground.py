@@ -51,7 +51,7 @@ def test_interior_edges_add_the_outline_of_an_arm_over_the_torso(rng):
 
 
 def test_hole_showing_background_stays_open():
-    from engine.stages.foreground import _fill_holes
+    from engine.stages.foreground.regions import _fill_holes
 
     body = np.zeros((200, 200), bool)  # the gap is 0.3 % of the image
     body[5:35, 5:25] = True
@@ -158,7 +158,7 @@ def test_fragment_near_the_body_is_kept_only_over_seen_background():
     # a lower leg cut off by a thin band the difference missed (trousers crossing the line
     # where wall meets floor) belongs to the body; a fragment far away, or one that is only a
     # guess over never-seen background, does not
-    from engine.stages.foreground import _clean
+    from engine.stages.foreground.regions import _clean
 
     mask = np.zeros((200, 100), bool)  # near = 4 % of 200 rows = 8 px
     mask[10:110, 20:40] = True  # the body

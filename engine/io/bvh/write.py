@@ -1,0 +1,137 @@
+"""Writing postures of the 17-joint body as a BVH file that
+:func:`engine.io.bvh.load_reference` reads back.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from engine.body.kinematics import part_rotations
+from engine.body.shapes import BodyShape
+from engine.body.skeleton import JOINTS, PARENTS, PART_ROOT_JOINT
+from engine.errors import InvalidInput
+
+
+def write_bvh(
+    path: str | os.PathLike,
+    joints: np.ndarray,
+    fps: float,
+    shape: BodyShape | None = None,
+) -> Path:
+    """Write postures of the 17-joint body as a BVH file (metres, our joint names).
+
+    The hierarchy is the 17-joint skeleton with ``shape.offsets`` as bone offsets (constant
+    bone lengths) and zero-rotation default posture; the root (hip) has position channels,
+    every joint ``Zrotation Yrotation Xrotation`` (its part's rotation relative to its
+    parent part, :func:`engine.body.kinematics.part_rotations`), leaves an End Site at zero
+    offset. Postures produced by forward kinematics with ``shape`` are reproduced exactly by
+    :func:`load_reference` (to ~1e-9 m); others are fitted part by part. Write already
+    heading-normalised postures (or load with ``normalise_heading=False``) for an exact
+    round trip.
+
+    Parameters
+    ----------
+    path : str or path-like
+    joints : ndarray, shape (T, 17, 3)
+        Metres.
+    fps : float
+    shape : BodyShape, optional
+        Bone offsets of the default posture; ``BodyShape.from_rest_joints(joints[0])``
+        when omitted.
+
+    Returns
+    -------
+    Path
+        The written file.
+
+    Raises
+    ------
+    InvalidInput
+        When ``joints`` is not (T, 17, 3) finite, or ``fps`` is not positive.
+    """
+    J = _checked(joints, fps)
+    if shape is None:
+        shape = BodyShape.from_rest_joints(J[0])
+    children: dict[int, list[int]] = {j: [] for j in range(17)}
+    for j in range(1, 17):
+        children[int(PARENTS[j])].append(j)
+    out = ["HIERARCHY", *_hierarchy(shape, children)]
+    order = _dfs_order(children)
+    out += ["MOTION", f"Frames: {J.shape[0]}", f"Frame Time: {1.0 / fps:.10g}"]
+    euler = _local_euler_deg(J, shape)
+    cols = np.concatenate([J[:, :1, :], euler[:, order]], axis=1).reshape(J.shape[0], -1)
+    out += [" ".join(f"{v:.10g}" for v in row) for row in cols]
+    p = Path(path)
+    p.write_text("\n".join(out) + "\n")
+    return p
+
+
+def _checked(joints: np.ndarray, fps: float) -> np.ndarray:
+    """``joints`` as finite floats (T, 17, 3), or InvalidInput naming the bad parameter."""
+    J = np.asarray(joints, dtype=float)
+    if J.ndim != 3 or J.shape[1:] != (17, 3) or J.shape[0] < 1:
+        raise InvalidInput(f"joints must have shape (T, 17, 3), got {J.shape}")
+    if not np.all(np.isfinite(J)):
+        raise InvalidInput("joints contains NaN or infinite values")
+    if not (isinstance(fps, int | float) and math.isfinite(fps) and fps > 0):
+        raise InvalidInput(f"fps must be a positive number, got {fps!r}")
+    return J
+
+
+def _local_euler_deg(J: np.ndarray, shape: BodyShape) -> np.ndarray:
+    """Each BVH joint's rotation relative to its parent as ZYX Euler angles in degrees,
+    shape (T, 17, 3), for postures J (T, 17, 3)."""
+    R_world = part_rotations(J, shape.offsets)  # (T, 12, 3, 3)
+    # world rotation of each BVH joint: that of the part it is the root of; leaves
+    # (ankles, wrists, head top) inherit their parent's, i.e. a zero local rotation
+    part_of_joint = np.full(17, -1)
+    part_of_joint[PART_ROOT_JOINT] = np.arange(len(PART_ROOT_JOINT))
+    R_joint = np.empty((J.shape[0], 17, 3, 3))
+    for j in range(17):
+        R_joint[:, j] = (
+            R_world[:, part_of_joint[j]] if part_of_joint[j] >= 0 else R_joint[:, PARENTS[j]]
+        )
+    R_local = R_joint.copy()
+    R_local[:, 1:] = np.swapaxes(R_joint[:, PARENTS[1:]], -1, -2) @ R_joint[:, 1:]
+    euler = Rotation.from_matrix(R_local.reshape(-1, 3, 3)).as_euler("ZYX", degrees=True)
+    return euler.reshape(J.shape[0], 17, 3)
+
+
+def _hierarchy(shape: BodyShape, children: dict[int, list[int]]) -> list[str]:
+    """The HIERARCHY section's lines after its keyword: the 17-joint skeleton with
+    ``shape.offsets`` as bone offsets, depth first."""
+    out: list[str] = []
+
+    def emit(j: int, depth: int) -> None:
+        pad = "\t" * depth
+        off = np.zeros(3) if j == 0 else shape.offsets[j - 1]
+        out.append(f"{pad}{'ROOT' if j == 0 else 'JOINT'} {JOINTS[j]}")
+        out.append(f"{pad}{{")
+        out.append(f"{pad}\tOFFSET {off[0]:.9f} {off[1]:.9f} {off[2]:.9f}")
+        pos = "Xposition Yposition Zposition " if j == 0 else ""
+        out.append(f"{pad}\tCHANNELS {6 if j == 0 else 3} {pos}Zrotation Yrotation Xrotation")
+        for c in children[j]:
+            emit(c, depth + 1)
+        if not children[j]:
+            out.extend([f"{pad}\tEnd Site", f"{pad}\t{{", f"{pad}\t\tOFFSET 0 0 0", f"{pad}\t}}"])
+        out.append(f"{pad}}}")
+
+    emit(0, 0)
+    return out
+
+
+def _dfs_order(children: dict[int, list[int]]) -> list[int]:
+    order: list[int] = []
+
+    def visit(j: int) -> None:
+        order.append(j)
+        for c in children[j]:
+            visit(c)
+
+    visit(0)
+    return order
