@@ -101,6 +101,12 @@ class ApiKey(Base):
     revoked_at: Mapped[datetime | None] = mapped_column(UTCDateTime(), default=None)
 
 
+def segment_names(domain_config: dict | None, n: int) -> list[str]:
+    """The coach's names of a reference's ``n`` segments ("segment i" where unnamed)."""
+    names = list(((domain_config or {}).get("segment_names")) or [])
+    return [names[i] if i < len(names) else f"segment {i + 1}" for i in range(n)]
+
+
 class Reference(Base):
     __tablename__ = "references"
 

@@ -10,6 +10,9 @@ from typing import Annotated, Any, Literal
 
 from pydantic import AnyHttpUrl, BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from app.core.validation import engine_domain
+from app.models import segment_names
+
 # A plausibility check only (no DNS, no email-validator dependency).
 EMAIL_PATTERN = r"^[^@\s]+@[^@\s]+\.[^@\s]+$"
 
@@ -136,11 +139,11 @@ class ReferencePublic(_Orm):
         config, derived = self.domain_config or {}, self.derived or {}
         self.frames, self.fps = derived.get("frames"), derived.get("fps")
         self.duration_s = derived.get("duration_s")
-        names = list(config.get("segment_names") or [])
-        n = max(len(derived.get("segments") or []) - 1, 0) or len(names)
-        self.segment_names = [names[i] if i < len(names) else f"segment {i + 1}"
-                              for i in range(n)]  # fmt: skip
-        self.domain = {k: v for k, v in config.items() if k not in ("mapping", "units_to_m")}
+        n = max(len(derived.get("segments") or []) - 1, 0) or len(
+            config.get("segment_names") or []
+        )
+        self.segment_names = segment_names(config, n)
+        self.domain = engine_domain(config)
         base = f"/api/v1/references/{self.id}"
         self.thumbnail, self.strip = f"{base}/thumbnail.svg", f"{base}/strip.svg"
         self.preview = f"{base}/preview.json"

@@ -280,13 +280,12 @@ def run_stages_0_2(
     views = _Views(perception, joints[c0], cal.offset_frames, s.alignment.keypoint_offsets)
     t0 = time.perf_counter()
     passes = len(cameras) + int(s.alignment.realign and cal.refine_frames > 0)
-    results = [
-        (aligned.E_C, i, cam, aligned)
-        for i, cam in enumerate(cameras)
-        for aligned in [align(joints, reference.shape, cam, fg.silhouettes, fg.skin,
-                              s.alignment, start=c0, keypoints=views.readings(cam),
-                              on_progress=_share(on_progress, i, passes))]  # fmt: skip
-    ]
+    results = []
+    for i, cam in enumerate(cameras):
+        aligned = align(joints, reference.shape, cam, fg.silhouettes, fg.skin, s.alignment,
+                        start=c0, keypoints=views.readings(cam),
+                        on_progress=_share(on_progress, i, passes))  # fmt: skip
+        results.append((aligned.E_C, i, cam, aligned))
     # the camera whose view explains the whole video best (CalibrationSettings.check_mirror)
     _, _, camera, result = min(results, key=lambda r: (r[0], r[1]))
     timing["alignment"] = time.perf_counter() - t0

@@ -123,6 +123,12 @@ def get_principal(
             401, "unauthorized", "an X-API-Key header or a signed-in session is required",
             headers={"WWW-Authenticate": "X-API-Key"},
         )  # fmt: skip
+    return principal_of(session, user)
+
+
+def principal_of(session: Session, user: User) -> Principal:
+    """A signed-in user as a principal (the pages use it too, so they see what the API
+    shows); 401 when their club is gone."""
     club = crud.get_club(session, user.club_id)
     if club is None:
         raise ApiError(401, "unauthorized", "your club no longer exists")

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from app import models
 from app.api.errors import ApiError
 from app.models import Analysis, Reference
 from app.schemas import SegmentPublic
@@ -96,8 +97,7 @@ def segments_or_error(result: Result) -> list[SegmentPublic]:
 
 def segment_names(ref: Reference, n: int) -> list[str]:
     """The coach's names of a reference's ``n`` segments ("segment i" where unnamed)."""
-    names = list(((ref.domain_config or {}).get("segment_names")) or [])
-    return [names[i] if i < len(names) else f"segment {i + 1}" for i in range(n)]
+    return models.segment_names(ref.domain_config, n)
 
 
 def page_summary(analysis: Analysis, result: Result) -> dict[str, Any]:

@@ -33,12 +33,7 @@ ENGINE_CHEAP_SETTINGS: dict = {
 FAKE_APP = "tests.worker.fake_app"
 
 
-@pytest.fixture
-def fake_env(worker_env):
-    return worker_env
-
-
-def test_canvas_end_to_end_with_progress(fake_env, workers, tmp_path, short_video):
+def test_canvas_end_to_end_with_progress(worker_env, workers, tmp_path, short_video):
     workers.start(app=FAKE_APP, concurrency=2)
     job = make_job(
         tmp_path, short_video, "a-canvas", {"fake_frames": 12, "fake_seconds_per_frame": 0.1}
@@ -70,11 +65,13 @@ def test_canvas_end_to_end_with_progress(fake_env, workers, tmp_path, short_vide
         assert f"analysis.stage_done stage={stage} analysis_id=a-canvas" in logs
 
 
-def test_worker_killed_mid_stage_then_restarted_completes(fake_env, workers, tmp_path, short_video):
+def test_worker_killed_mid_stage_then_restarted_completes(
+    worker_env, workers, tmp_path, short_video
+):
     # Redis redelivers an unacknowledged message only after the visibility timeout; keep it
     # short here (longer than any single fake stage: 6 frames x 0.3 s).
-    fake_env["COACH_VISIBILITY_TIMEOUT_S"] = "4"
-    fake_env["COACH_RESTORE_INTERVAL_S"] = "1"
+    worker_env["COACH_VISIBILITY_TIMEOUT_S"] = "4"
+    worker_env["COACH_RESTORE_INTERVAL_S"] = "1"
     settings = {"fake_frames": 12, "fake_seconds_per_frame": 0.3}
     first = workers.start(app=FAKE_APP, concurrency=1, name="first")
     job = make_job(tmp_path, short_video, "a-kill", settings)
@@ -100,7 +97,7 @@ def test_worker_killed_mid_stage_then_restarted_completes(fake_env, workers, tmp
     assert "analysis.stage_done stage=prepare" not in second_log  # resumed, not redone
 
 
-def test_engine_error_is_recorded_not_retried(fake_env, workers, tmp_path, short_video):
+def test_engine_error_is_recorded_not_retried(worker_env, workers, tmp_path, short_video):
     workers.start(app=FAKE_APP)
     job = make_job(tmp_path, short_video, "a-bad", {"fake_fail": "invalid"})
     task_id = celery_app.enqueue(job)
@@ -112,7 +109,7 @@ def test_engine_error_is_recorded_not_retried(fake_env, workers, tmp_path, short
     assert celery_app.app.AsyncResult(task_id).state == "FAILURE"
 
 
-def test_cancel_stops_a_running_analysis(fake_env, workers, tmp_path, short_video):
+def test_cancel_stops_a_running_analysis(worker_env, workers, tmp_path, short_video):
     workers.start(app=FAKE_APP)
     job = make_job(
         tmp_path, short_video, "a-cancel", {"fake_frames": 40, "fake_seconds_per_frame": 0.2}

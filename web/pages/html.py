@@ -14,7 +14,7 @@ from fastapi.templating import Jinja2Templates
 
 from app import crud
 from app.api import access
-from app.api.deps import NotifierDep, Principal, SessionDep
+from app.api.deps import NotifierDep, SessionDep, principal_of
 from app.api.errors import ApiError
 from app.api.routes.comments import comment_rows
 from app.core import invites, media
@@ -31,14 +31,6 @@ router = APIRouter(include_in_schema=False)
 def page_user(request: Request, session) -> User | None:
     uid = request.session.get("user_id")
     return crud.get_user(session, uid) if isinstance(uid, int) else None
-
-
-def _principal(session, user: User) -> Principal:
-    """The signed-in user as the API's principal, so pages see exactly what the API shows."""
-    club = crud.get_club(session, user.club_id)
-    if club is None:
-        raise ApiError(401, "unauthorized", "your club no longer exists")
-    return Principal(club, user)
 
 
 def _sign_in(request: Request) -> RedirectResponse:
@@ -119,7 +111,7 @@ def _analysis(request, analysis_id, session, notifier, *, review: bool):
     if review and user.role != "coach":
         return _forbidden(request, user, "Only coaches review analyses.")
     try:
-        a = access.analysis_for(session, _principal(session, user), analysis_id)
+        a = access.analysis_for(session, principal_of(session, user), analysis_id)
     except ApiError:
         return _render(request, "message.html", user, 404, title="Not found",
                        message="There is no such analysis in your club.")  # fmt: skip
@@ -133,7 +125,7 @@ def report_page(request: Request, analysis_id: str, session: SessionDep, notifie
     if user is None:
         return _sign_in(request)
     try:
-        a = access.done_analysis(session, _principal(session, user), analysis_id, notifier)
+        a = access.done_analysis(session, principal_of(session, user), analysis_id, notifier)
         result = access.result_of(a)
     except ApiError as exc:
         return _render(request, "message.html", user, exc.status_code, title="No report",
@@ -212,7 +204,7 @@ def compare_page(
     if user is None:
         return _sign_in(request)
     try:
-        performer = access.performer_for(session, _principal(session, user), performer_id)
+        performer = access.performer_for(session, principal_of(session, user), performer_id)
     except ApiError:
         return _render(request, "message.html", user, 404, title="Not found",
                        message="There is no such performer in your club.")  # fmt: skip
