@@ -143,7 +143,10 @@ def list_performers(session: Session, *, club_id: int, limit: int, offset: int) 
 
 def authenticate(session: Session, *, email: str, password: str) -> User | None:
     """The user with this email whose password matches (emails are unique per club)."""
-    users = session.scalars(select(User).where(User.email == email.lower()))
+    users = [u for u in session.scalars(select(User).where(User.email == email.lower()))
+             if u.password_hash]  # fmt: skip
+    if not users:  # as slow as a wrong password, so timing does not tell who has an account
+        security.verify_nothing(password)
     for user in users:
         if security.verify_password(password, user.password_hash):
             return user

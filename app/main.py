@@ -15,112 +15,29 @@ from importlib.metadata import entry_points
 from fastapi import FastAPI
 from fastapi.middleware.cors import CORSMiddleware
 from starlette.middleware.sessions import SessionMiddleware
-from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from app.api import errors
+from app.api.middleware import (
+    API_PREFIX,
+    BodyLimitMiddleware,
+    CrossOriginGuard,
+    SecurityHeadersMiddleware,
+)
 from app.api.routes import api_router
 from app.core.config import Settings, get_settings
 from app.core.db import make_engine, make_sessionmaker, run_migrations
-from app.core.ratelimit import RateLimiter
+from app.core.ratelimit import RateLimiter, SignInThrottle
 from app.core.reflect import Notifier, Reflector
+from app.core.security import stored_secret
 from app.core.storage import Storage
 
 log = logging.getLogger("app")
 
-API_PREFIX = "/api/v1"
-#: Body limit for requests that carry no file (JSON, forms).
-SMALL_BODY_BYTES = 1024 * 1024
-
-
-class _BodyTooLarge(Exception):
-    pass
-
-
-class BodyLimitMiddleware:
-    """Refuses request bodies over a per-route limit with 413, before they are parsed.
-
-    Checks Content-Length up front and counts the bytes of bodies sent without it, so a
-    client cannot make the multipart parser spool an unbounded upload.
-    """
-
-    def __init__(self, app: ASGIApp, settings: Settings) -> None:
-        self.app = app
-        extra = settings.multipart_overhead_bytes
-        self.limits = {
-            f"{API_PREFIX}/analyses": settings.max_video_bytes + extra,
-            f"{API_PREFIX}/references": settings.max_bvh_bytes + settings.max_domain_bytes + extra,
-        }
-
-    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if scope["type"] != "http" or scope["method"] in ("GET", "HEAD", "OPTIONS"):
-            await self.app(scope, receive, send)
-            return
-        limit = self.limits.get(scope["path"].rstrip("/"), SMALL_BODY_BYTES)
-        headers = dict(scope.get("headers") or [])
-        declared = headers.get(b"content-length")
-        if declared is not None and declared.isdigit() and int(declared) > limit:
-            await self._refuse(send, limit)
-            return
-        received = 0
-        started = False
-
-        async def counting_receive() -> Message:
-            nonlocal received
-            message = await receive()
-            if message["type"] == "http.request":
-                received += len(message.get("body", b""))
-                if received > limit:
-                    raise _BodyTooLarge
-            return message
-
-        async def tracking_send(message: Message) -> None:
-            nonlocal started
-            started = started or message["type"] == "http.response.start"
-            await send(message)
-
-        try:
-            await self.app(scope, counting_receive, tracking_send)
-        except _BodyTooLarge:
-            if not started:
-                await self._refuse(send, limit)
-
-    @staticmethod
-    async def _refuse(send: Send, limit: int) -> None:
-        response = errors.error_response(
-            413, "too_large", f"the request body is larger than the limit of {limit} bytes",
-            {"limit_bytes": limit},
-        )  # fmt: skip
-        await send(
-            {
-                "type": "http.response.start",
-                "status": 413,
-                "headers": [(k.encode(), v.encode()) for k, v in response.headers.items()],
-            }
-        )
-        await send({"type": "http.response.body", "body": response.body})
-
-
-class SecurityHeadersMiddleware:
-    def __init__(self, app: ASGIApp) -> None:
-        self.app = app
-
-    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        async def send_with_headers(message: Message) -> None:
-            if message["type"] == "http.response.start":
-                message.setdefault("headers", [])
-                message["headers"] = list(message["headers"]) + [
-                    (b"x-content-type-options", b"nosniff"),
-                    (b"referrer-policy", b"same-origin"),
-                    (b"x-frame-options", b"SAMEORIGIN"),
-                ]
-            await send(message)
-
-        await self.app(scope, receive, send_with_headers if scope["type"] == "http" else send)
-
-
 def create_app(settings: Settings | None = None) -> FastAPI:
     settings = settings or get_settings()
     storage = Storage(settings.data_dir)
+    if removed := storage.clean_tmp(older_than_s=settings.stale_upload_s):
+        log.info("storage.tmp_cleaned uploads=%d", removed)
     engine = make_engine(settings.sqlalchemy_url)
     run_migrations(engine)
     sessions = make_sessionmaker(engine)
@@ -154,6 +71,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.storage = storage
     app.state.notifier = notifier
     app.state.rate_limiter = RateLimiter(settings.rate_limit_per_s, settings.rate_limit_burst)
+    app.state.signin_throttle = SignInThrottle(
+        free_per_account=settings.signin_free_per_account,
+        free_per_ip=settings.signin_free_per_ip,
+        backoff_s=settings.signin_backoff_s,
+        max_lock_s=settings.signin_max_lock_s,
+    )
 
     errors.install(app)
     app.include_router(api_router, prefix=API_PREFIX)
@@ -162,7 +85,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     # Outermost last: body limits run first, then CORS (closed unless origins are set).
     app.add_middleware(
         SessionMiddleware,
-        secret_key=settings.secret_key,
+        secret_key=settings.secret_key or stored_secret(settings.data_dir),
         session_cookie="coach_session",
         max_age=settings.session_max_age_s,
         same_site="lax",
@@ -172,10 +95,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         CORSMiddleware,
         allow_origins=settings.cors_origins,
         allow_methods=["GET", "POST", "PUT", "PATCH", "DELETE"],
-        allow_headers=["X-API-Key", "Content-Type", "Idempotency-Key"],
+        allow_headers=["X-API-Key", "Authorization", "Content-Type", "Idempotency-Key"],
         allow_credentials=False,
     )
-    app.add_middleware(SecurityHeadersMiddleware)
+    app.add_middleware(CrossOriginGuard, settings=settings)
+    app.add_middleware(SecurityHeadersMiddleware, settings=settings)
     app.add_middleware(BodyLimitMiddleware, settings=settings)
     return app
 

@@ -101,6 +101,20 @@ class ApiKey(Base):
     revoked_at: Mapped[datetime | None] = mapped_column(UTCDateTime(), default=None)
 
 
+class UserSession(Base):
+    """A signed-in browser. The cookie carries only the token; signing out, or changing the
+    password, deletes the row, so a captured cookie stops working at once."""
+
+    __tablename__ = "user_sessions"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    user_id: Mapped[int] = mapped_column(ForeignKey("users.id", ondelete="CASCADE"), index=True)
+    #: sha256 hex of the cookie's token.
+    token_hash: Mapped[str] = mapped_column(String(64), unique=True)
+    created_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
+    expires_at: Mapped[datetime] = mapped_column(UTCDateTime())
+
+
 def segment_names(domain_config: dict | None, n: int) -> list[str]:
     """The coach's names of a reference's ``n`` segments ("segment i" where unnamed)."""
     names = list(((domain_config or {}).get("segment_names")) or [])

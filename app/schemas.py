@@ -113,6 +113,11 @@ class LoginRequest(BaseModel):
     password: str = Field(min_length=1, max_length=256)
 
 
+class PasswordChange(BaseModel):
+    current_password: str = Field(min_length=1, max_length=256)
+    new_password: str = Field(min_length=8, max_length=256)
+
+
 # ---- references
 class ReferencePublic(_Orm):
     """A reference as stored, plus what pages show of it (derived from the stored fields)."""

@@ -12,6 +12,7 @@ from sqlalchemy.orm import Session
 
 from app import crud
 from app.api.errors import ApiError
+from app.core import sessions
 from app.core.config import Settings
 from app.core.queue import JobQueue, get_queue
 from app.core.ratelimit import RateLimiter
@@ -70,8 +71,7 @@ def _check_key(request: Request, session: Session, key: str) -> ApiKey:
 
 def _signed_in(request: Request, session: Session) -> User | None:
     """The browser user signed in through ``POST /api/v1/session`` (signed session cookie)."""
-    user_id = request.session.get("user_id")
-    return crud.get_user(session, int(user_id)) if isinstance(user_id, int) else None
+    return sessions.current_user(request, session)
 
 
 @dataclass(frozen=True)

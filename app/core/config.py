@@ -9,8 +9,11 @@ from typing import Literal
 from pydantic import Field, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-#: The placeholder secret; refused outside development.
-DEFAULT_SECRET = "changethis"
+#: Placeholder secrets found in examples; refused in every environment, since anyone can
+#: sign a session cookie with them.
+PLACEHOLDER_SECRETS = frozenset({"changethis", "change-me", "changeme", "secret", "dev"})
+#: Shortest secret accepted from the environment (a generated one has 64 characters).
+MIN_SECRET_CHARS = 16
 
 
 class Settings(BaseSettings):
@@ -20,8 +23,9 @@ class Settings(BaseSettings):
     data_dir: Path = Path("./data")
     #: Any SQLAlchemy URL; empty means a SQLite file ``coach.db`` in the data dir.
     database_url: str = ""
-    #: Signs browser session cookies.
-    secret_key: str = DEFAULT_SECRET
+    #: Signs browser session cookies. Empty (the default): a random secret generated at first
+    #: start and kept in ``<data_dir>/secret_key`` (app.core.security.stored_secret).
+    secret_key: str = ""
     #: "embedded" runs a local worker without Redis (``coach serve``); else a Celery broker URL.
     broker_url: str = "embedded"
     worker_concurrency: int = Field(default=1, ge=1, le=64)
@@ -34,8 +38,15 @@ class Settings(BaseSettings):
     max_video_bytes: int = Field(default=200 * 1024 * 1024, gt=0)
     max_video_duration_s: float = Field(default=60.0, gt=0)
     max_bvh_bytes: int = Field(default=20 * 1024 * 1024, gt=0)
+    #: BVH references beyond these are refused while they are read (engine.io.bvh.BvhLimits):
+    #: 10 minutes at 60 fps; nodes with end sites (a Mixamo body with fingers has about 90).
+    max_reference_frames: int = Field(default=36_000, gt=0)
+    max_reference_joints: int = Field(default=256, gt=0)
+    max_reference_duration_s: float = Field(default=600.0, gt=0)
     max_domain_bytes: int = Field(default=64 * 1024, gt=0)
     max_page_size: int = Field(default=100, ge=1, le=1000)
+    #: An upload left in ``tmp/`` this long is from a process that died; removed at start.
+    stale_upload_s: float = Field(default=3600.0, gt=0)
     #: Extra bytes a multipart body may carry beyond the file (boundaries, other fields).
     multipart_overhead_bytes: int = 64 * 1024
 
@@ -55,6 +66,12 @@ class Settings(BaseSettings):
     webhook_timeout_s: float = Field(default=10.0, gt=0)
 
     session_max_age_s: int = 14 * 24 * 3600
+    # Sign-in throttle: free failures per account and per client address, then a lock that
+    # doubles with each further failure, from signin_backoff_s up to signin_max_lock_s.
+    signin_free_per_account: int = Field(default=5, ge=1)
+    signin_free_per_ip: int = Field(default=20, ge=1)
+    signin_backoff_s: float = Field(default=1.0, gt=0)
+    signin_max_lock_s: float = Field(default=900.0, gt=0)
 
     @property
     def sqlalchemy_url(self) -> str:
@@ -67,11 +84,18 @@ class Settings(BaseSettings):
         return self.environment == "development"
 
     @model_validator(mode="after")
-    def _refuse_default_secrets(self) -> Settings:
-        if self.secret_key == DEFAULT_SECRET and not self.is_development:
+    def _refuse_weak_secrets(self) -> Settings:
+        if not self.secret_key:
+            return self
+        if (
+            self.secret_key.lower() in PLACEHOLDER_SECRETS
+            or len(self.secret_key) < MIN_SECRET_CHARS
+        ):
             raise ValueError(
-                f"COACH_SECRET_KEY is the default {DEFAULT_SECRET!r}; set a real secret "
-                f"outside development (environment={self.environment})"
+                "COACH_SECRET_KEY is a placeholder or shorter than "
+                f"{MIN_SECRET_CHARS} characters: anyone could sign a session with it. Set a "
+                "random one (python -c 'import secrets; print(secrets.token_urlsafe(48))') "
+                "or leave it unset to have one generated in the data directory"
             )
         return self
 

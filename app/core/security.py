@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import hashlib
 import hmac
+import os
 import secrets
+import time
+from pathlib import Path
 
 from argon2 import PasswordHasher
 from argon2.exceptions import InvalidHashError, VerificationError
@@ -51,3 +54,45 @@ def sign_webhook(body: bytes, secret: str) -> str:
 def verify_webhook(body: bytes, secret: str, header: str) -> bool:
     """What a receiver does: recompute and compare in constant time."""
     return hmac.compare_digest(sign_webhook(body, secret), header)
+
+
+#: File in the data directory holding the generated session secret.
+SECRET_FILE = "secret_key"
+
+
+def stored_secret(data_dir: Path) -> str:
+    """The data directory's session secret, generated on first use (mode 0600).
+
+    ``O_EXCL`` makes the first of several starting processes the only writer; the others
+    read what it wrote, so every API process behind one data volume signs alike.
+    """
+    path = data_dir / SECRET_FILE
+    data_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    except FileExistsError:
+        for _ in range(50):  # another process may be between its create and its write
+            secret = path.read_text().strip()
+            if secret:
+                return secret
+            time.sleep(0.02)
+        raise RuntimeError(f"{path} is empty; delete it to have a new secret generated") from None
+    secret = secrets.token_urlsafe(48)
+    with os.fdopen(fd, "w") as f:
+        f.write(secret)
+    return secret
+
+
+def new_session_token() -> tuple[str, str]:
+    """A browser session: ``(token for the cookie, sha256 hex stored server-side)``."""
+    token = secrets.token_urlsafe(32)
+    return token, hash_api_key(token)
+
+
+#: A hash verified when no account matches, so a wrong email costs what a wrong password does.
+_DUMMY_HASH = _hasher.hash(secrets.token_urlsafe(16))
+
+
+def verify_nothing(password: str) -> None:
+    """Spend one password verification's time (constant-time sign-in for unknown emails)."""
+    verify_password(password, _DUMMY_HASH)

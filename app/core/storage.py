@@ -3,8 +3,10 @@
 Layout under ``data_dir``::
 
     coach.db                  SQLite database (default)
-    tmp/<random>/             uploads being received and checked; removed on failure
-    references/<id>/          reference.bvh, reference.domain.json
+    secret_key                the session secret, generated at first start (mode 0600)
+    tmp/<random>/             uploads being received and checked; removed on failure, and
+                              at start when left by a process that died mid-upload
+    references/<id>/          reference.bvh
     analyses/<uuid>/          the worker's folder (worker.contract): video.<ext>, status.json,
                               result.json, stages/
 
@@ -17,6 +19,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import time
 import uuid
 from pathlib import Path
 
@@ -39,6 +42,18 @@ class Storage:
             (self.root / sub).mkdir(parents=True, exist_ok=True)
 
     # ---- uploads
+    def clean_tmp(self, older_than_s: float) -> int:
+        """Remove uploads left in ``tmp/`` by a process that died while receiving them.
+
+        Only those untouched for ``older_than_s``: other API processes sharing this data
+        directory may be receiving theirs right now. Returns how many were removed.
+        """
+        cutoff = time.time() - older_than_s
+        stale = [p for p in (self.root / "tmp").iterdir() if p.stat().st_mtime < cutoff]
+        for path in stale:
+            self.remove(path)
+        return len(stale)
+
     def new_tmp_dir(self) -> Path:
         path = self.root / "tmp" / uuid.uuid4().hex
         path.mkdir(parents=True)

@@ -87,16 +87,6 @@ def test_cors_is_closed_by_default(client):
     assert "access-control-allow-origin" not in r.headers
 
 
-def test_default_secret_refused_outside_development():
-    import pytest
-
-    from app.core.config import Settings
-
-    with pytest.raises(ValueError, match="COACH_SECRET_KEY"):
-        Settings(environment="production")
-    Settings(environment="production", secret_key="s3cret-from-the-vault")
-
-
 def test_metrics_are_prometheus_text_from_the_workers_files(client, settings):
     from worker import metrics
 

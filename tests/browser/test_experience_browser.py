@@ -126,7 +126,9 @@ def test_printable_report_has_stills_and_segment_table(server, browser, clip, cl
     sign_in(page, server.url, "olive@example.com", next_path=f"/analyses/{aid}/report")
     stills = page.locator(".still img")
     assert 1 <= stills.count() <= 4
-    page.wait_for_function("Array.from(document.images).every(i => i.complete && i.naturalWidth)")
+    page.wait_for_function(
+        "() => Array.from(document.images).every(i => i.complete && i.naturalWidth)"
+    )
     rgb = _pixels(stills.first.screenshot())
     warm = (rgb[..., 0] > 180) | (rgb[..., 1] > 180)
     red_or_green = warm & (rgb[..., 2] < 80)
@@ -161,7 +163,7 @@ def test_upload_errors_are_shown_next_to_the_file_input(server, browser, shots, 
     assert err.is_hidden()
     page.locator("#upload-button").focus()
     page.get_by_role("button", name="Upload and analyse").click()
-    page.wait_for_function("!document.getElementById('video-error').hidden", timeout=20_000)
+    page.wait_for_function("() => !document.getElementById('video-error').hidden", timeout=20_000)
     assert "cannot be analysed as a video" in err.inner_text()
     assert page.evaluate("document.activeElement.id") == "video"
     assert page.locator("#video").get_attribute("aria-invalid") == "true"

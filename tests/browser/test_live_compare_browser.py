@@ -90,7 +90,7 @@ def test_3d_view_fills_in_while_the_analysis_runs(server, browser, long_clip, sh
     assert "3D:" in page.locator("#live3d-status").inner_text()
     # Candidates arrive as stage-3 chunks finish (unless the whole stage slipped between polls).
     page.wait_for_function(
-        "['candidates', 'done'].includes(document.getElementById('live3d').dataset.phase)"
+        "() => ['candidates', 'done'].includes(document.getElementById('live3d').dataset.phase)"
         " || document.getElementById('analysis').dataset.status === 'done'",
         timeout=90_000,
     )
@@ -146,13 +146,15 @@ def test_two_attempts_side_by_side(server, browser, clip, clip_result, shots):
     assert page.locator("#cmp-plot-svg polyline.curve-a").count() == 1
     assert page.locator("#cmp-plot-svg polyline.curve-b").count() == 1
     page.wait_for_function(
-        "['video-a', 'video-b'].every(i => document.getElementById(i).readyState >= 2)",
+        "() => ['video-a', 'video-b'].every(i => document.getElementById(i).readyState >= 2)",
         timeout=30_000,
     )
     page.screenshot(path=str(shots / "compare.png"), full_page=True)
     # Swapped by hand: worse, and the address says which two.
     page.locator(f"tr[data-id='{after}'] input[name=pick-a]").check()
     page.locator(f"tr[data-id='{before}'] input[name=pick-b]").check()
-    page.wait_for_function("document.getElementById('cmp-summary').textContent.includes('worse')")
+    page.wait_for_function(
+        "() => document.getElementById('cmp-summary').textContent.includes('worse')"
+    )
     assert f"a={after}" in page.url and f"b={before}" in page.url
     ctx.close()

@@ -55,12 +55,14 @@ def go_to_frame(page, frame: int) -> None:
     page.keyboard.press("Home")
     for _ in range(frame):
         page.keyboard.press("ArrowRight")
-    page.wait_for_function(f"document.getElementById('analysis').dataset.frame === '{frame}'")
+    page.wait_for_function(f"() => document.getElementById('analysis').dataset.frame === '{frame}'")
 
 
 def wait_results(page, timeout_ms: float = 60_000) -> None:
     page.wait_for_selector("#analysis[data-ready=true]", timeout=timeout_ms)
-    page.wait_for_function("document.getElementById('video').readyState >= 2", timeout=timeout_ms)
+    page.wait_for_function(
+        "() => document.getElementById('video').readyState >= 2", timeout=timeout_ms
+    )
 
 
 def test_upload_through_the_page_runs_to_results(server, browser, clip, shots):
@@ -76,7 +78,7 @@ def test_upload_through_the_page_runs_to_results(server, browser, clip, shots):
     page.screenshot(path=str(shots / "upload.png"), full_page=True)
     page.get_by_role("button", name="Upload and analyse").click()
     page.wait_for_url("**/analyses/*", timeout=30_000)
-    page.wait_for_function("document.getElementById('stage-bar').value > 0", timeout=60_000)
+    page.wait_for_function("() => document.getElementById('stage-bar').value > 0", timeout=60_000)
     page.screenshot(path=str(shots / "progress.png"), full_page=True)
     assert page.locator("#stage-pct").inner_text().endswith("% overall")
     wait_results(page, timeout_ms=170_000)
@@ -140,11 +142,16 @@ def test_results_overlay_plot_and_cursor_follow_the_video(
         assert re.fullmatch(r"\d\.\d°|\d{2,}°", score), score
     # the card of the segment holding the misfit frames says so, the others do not
     warned = page.locator(".seg-card .seg-misfit")
-    assert warned.count() == len({i for i, s in enumerate(result["segments"])
-                                  if s["performer_start"] <= 5 and s["performer_end"] >= 3})
+    assert warned.count() == len(
+        {
+            i
+            for i, s in enumerate(result["segments"])
+            if s["performer_start"] <= 5 and s["performer_end"] >= 3
+        }
+    )
     # its card opens at the first frame the video disagrees with
     page.locator(".seg-card", has=page.locator(".seg-misfit")).first.click()
-    page.wait_for_function("document.getElementById('analysis').dataset.frame === '3'")
+    page.wait_for_function("() => document.getElementById('analysis').dataset.frame === '3'")
     counts = [int(t.split("disagrees in ")[1].split()[0]) for t in warned.all_inner_texts()]
     assert "mostly at r_knee->r_ankle:" in " ".join(warned.all_inner_texts())
     assert sum(counts) >= 3, counts  # a boundary frame belongs to both of its segments
@@ -156,7 +163,7 @@ def test_results_overlay_plot_and_cursor_follow_the_video(
     x0 = float(page.get_attribute("#plot-cursor", "x1"))
     page.get_by_role("button", name="Play").click()
     page.wait_for_function(
-        "+document.getElementById('analysis').dataset.frame >= 4", timeout=10_000
+        "() => +document.getElementById('analysis').dataset.frame >= 4", timeout=10_000
     )
     x1 = float(page.get_attribute("#plot-cursor", "x1"))
     assert x1 > x0
@@ -168,7 +175,7 @@ def test_results_overlay_plot_and_cursor_follow_the_video(
     last = clip_result["segments"][-1]
     page.locator(".seg-card").last.click()
     page.wait_for_function(
-        f"document.getElementById('analysis').dataset.frame === '{last['performer_start']}'"
+        f"() => document.getElementById('analysis').dataset.frame === '{last['performer_start']}'"
     )
     ctx.close()
 
@@ -183,16 +190,16 @@ def test_coach_review_comments_persist_and_exports_parse(server, browser, clip, 
     page.locator("#next").click()
     page.get_by_label("New comment").fill("Keep the left arm straight here")
     page.get_by_role("button", name="Add comment").click()
-    page.wait_for_function("document.querySelectorAll('#comments li.comment').length === 1")
+    page.wait_for_function("() => document.querySelectorAll('#comments li.comment').length === 1")
     page.get_by_label("New comment").fill("Too quick overall")
     page.get_by_label("Pin to").select_option(
         label=f"segment: {page.locator('.seg-card h3').first.inner_text()}"
     )
     page.get_by_role("button", name="Add comment").click()
-    page.wait_for_function("document.querySelectorAll('#comments li.comment').length === 2")
+    page.wait_for_function("() => document.querySelectorAll('#comments li.comment').length === 2")
     page.reload()
     wait_results(page)
-    page.wait_for_function("document.querySelectorAll('#comments li.comment').length === 2")
+    page.wait_for_function("() => document.querySelectorAll('#comments li.comment').length === 2")
     texts = page.locator("#comments li.comment").all_inner_texts()
     assert any("frame 2" in t and "left arm" in t for t in texts), texts
     assert page.locator("#segment-table tbody tr").count() == len(clip_result["segments"])
@@ -278,7 +285,9 @@ def test_coach_dashboard_and_references(server, browser, clip, clip_result, shot
     page.locator("#ref-upload").get_by_label("Name", exact=True).fill("Second swing")
     page.get_by_label("BVH file").set_input_files(str(CMU / "64_29.bvh"))
     page.get_by_role("button", name="Upload reference").click()
-    page.wait_for_function("document.querySelectorAll('.ref-card').length === 2", timeout=30_000)
+    page.wait_for_function(
+        "() => document.querySelectorAll('.ref-card').length === 2", timeout=30_000
+    )
     card = page.locator(".ref-card").first
     # the detected segments of the upload (64_29: three) are counted for the coach
     card.get_by_label("Segment names (3 segments, one a line").fill("address\nbackswing\ndownswing")
@@ -286,7 +295,7 @@ def test_coach_dashboard_and_references(server, browser, clip, clip_result, shot
     card.get_by_label("l_knee->l_ankle tolerance in degrees").fill("15")
     card.get_by_role("button", name="Save").click()
     card.get_by_text("Saved.").wait_for()
-    page.wait_for_function("Array.from(document.images).every(i => i.complete)")
+    page.wait_for_function("() => Array.from(document.images).every(i => i.complete)")
     page.screenshot(path=str(shots / "references.png"), full_page=True)
     page.reload()
     page.wait_for_selector(".ref-card")

@@ -3,6 +3,7 @@ page scripts) or, for the dashboard and the printable report, is rendered here."
 
 from __future__ import annotations
 
+import re
 from datetime import UTC, datetime, time, timedelta
 from pathlib import Path
 from typing import Annotated, Any
@@ -17,7 +18,7 @@ from app.api import access
 from app.api.deps import NotifierDep, SessionDep, principal_of
 from app.api.errors import ApiError
 from app.api.routes.comments import comment_rows
-from app.core import invites, media
+from app.core import invites, media, sessions
 from app.core.reflect import reflect
 from app.core.summary import segment_names, summarise_segments
 from app.models import ANALYSIS_STATES, User
@@ -29,8 +30,18 @@ router = APIRouter(include_in_schema=False)
 
 
 def page_user(request: Request, session) -> User | None:
-    uid = request.session.get("user_id")
-    return crud.get_user(session, uid) if isinstance(uid, int) else None
+    return sessions.current_user(request, session)
+
+
+#: A path on this site: a slash, then no second slash or backslash (``//evil``, ``/\\evil``
+#: leave the site), and only URL characters, so no tab or newline that a browser would drop
+#: (``/%09/evil`` becomes ``//evil``).
+_LOCAL_PATH = re.compile(r"/(?![/\\])[A-Za-z0-9\-._~!$&'()*+,;=:@%/?#]*")
+
+
+def local_path(target: str) -> str:
+    """``target`` if it is a path on this site, else ``/`` (no open redirect after sign-in)."""
+    return target if _LOCAL_PATH.fullmatch(target) and "\\" not in target else "/"
 
 
 def _sign_in(request: Request) -> RedirectResponse:
@@ -59,8 +70,7 @@ def home(request: Request, session: SessionDep):
 
 @router.get("/login", response_class=HTMLResponse)
 def login(request: Request, session: SessionDep, next: str = "/"):
-    safe_next = next if next.startswith("/") and not next.startswith("//") else "/"
-    return _render(request, "login.html", page_user(request, session), next=safe_next)
+    return _render(request, "login.html", page_user(request, session), next=local_path(next))
 
 
 @router.get("/join/{token}", response_class=HTMLResponse)

@@ -6,9 +6,9 @@ from datetime import timedelta
 
 from fastapi import APIRouter, Request
 
-from app.api.deps import CurrentCoach, SessionDep
+from app.api.deps import CurrentCoach, SessionDep, SettingsDep
 from app.api.errors import ApiError, errors
-from app.core import invites
+from app.core import invites, sessions
 from app.schemas import InviteCreate, InvitePublic, JoinBody, JoinedPublic
 
 router = APIRouter(tags=["invites"])
@@ -39,7 +39,9 @@ def create_invite(body: InviteCreate, request: Request, who: CurrentCoach, sessi
     summary="Redeem an invite: create the performer and sign them in",
     responses=errors(404, 410, 422),
 )  # fmt: skip
-def join(token: str, body: JoinBody, request: Request, session: SessionDep):
+def join(
+    token: str, body: JoinBody, request: Request, session: SessionDep, settings: SettingsDep
+):
     try:
         user = invites.redeem_invite(
             session, token, display_name=body.display_name, email=body.email,
@@ -47,7 +49,5 @@ def join(token: str, body: JoinBody, request: Request, session: SessionDep):
         )  # fmt: skip
     except invites.InviteError as exc:
         raise ApiError(_INVITE_STATUS[exc.reason], f"invite_{exc.reason}", str(exc)) from None
-    request.session.clear()
-    request.session["user_id"] = user.id
-    request.session["club_id"] = user.club_id
+    sessions.start(request, session, user, settings.session_max_age_s)
     return JoinedPublic(id=user.id, display_name=user.display_name, url="/upload")
