@@ -9,12 +9,15 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from app.core.config import Settings
 from engine.errors import InvalidInput
 from engine.reference.domain import parse_domain as engine_parse
 from engine.reference.domain import reference_segments
+
+if TYPE_CHECKING:
+    from engine.io.bvh import BvhLimits
 
 
 def probe_video(path: Path, settings: Settings) -> dict[str, Any]:
@@ -86,9 +89,26 @@ def parse_domain(raw: bytes) -> dict[str, Any]:
     return data
 
 
-def inspect_reference(path: Path, domain: dict[str, Any] | None) -> dict[str, Any]:
+def reference_limits(settings: Settings) -> BvhLimits:
+    """The engine's BVH limits from the service settings (6 channels per joint at most)."""
+    from engine.io.bvh import BvhLimits
+
+    return BvhLimits(
+        max_frames=settings.max_reference_frames,
+        max_duration_s=settings.max_reference_duration_s,
+        max_joints=settings.max_reference_joints,
+        max_channels=6 * settings.max_reference_joints,
+    )
+
+
+def inspect_reference(
+    path: Path, domain: dict[str, Any] | None, settings: Settings | None = None
+) -> dict[str, Any]:
     """Import the BVH onto the 17-joint body (refusing unmappable files, naming the missing
     joints) and return the derived description stored with the reference.
+
+    With ``settings``, files over its reference limits are refused as they are read (an
+    upload); without, any file is read (one already on the server: the demo, migrations).
 
     ``segments`` holds the segment boundaries every analysis of this reference uses (the
     domain's starts, or those detected from the motion), then the last frame: n + 1 frame
@@ -98,7 +118,10 @@ def inspect_reference(path: Path, domain: dict[str, Any] | None) -> dict[str, An
     from engine.io.bvh import load_reference
 
     domain = domain or {}
-    ref = load_reference(path, mapping=domain.get("mapping"), units_to_m=domain.get("units_to_m"))
+    ref = load_reference(
+        path, mapping=domain.get("mapping"), units_to_m=domain.get("units_to_m"),
+        limits=reference_limits(settings) if settings is not None else None,
+    )  # fmt: skip
     motion = ref.motion
     knowledge = engine_parse(engine_domain(domain), source="domain configuration")
     try:

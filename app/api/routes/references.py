@@ -46,7 +46,9 @@ def too_large(what: str, limit: int) -> ApiError:
         "`default_tolerance_deg`, `boundary`). `derived.segments` gives the segment "
         "boundaries every analysis uses: the starts, then the last frame. Starts outside the "
         "motion, or names that do not match the number of segments, are refused with 422 "
-        "`invalid_domain`."
+        "`invalid_domain`. A file with more frames, joints or a longer duration than the "
+        "service's limits (`COACH_MAX_REFERENCE_FRAMES`, `_JOINTS`, `_DURATION_S`) is refused "
+        "with 422 `invalid_reference` as soon as its header shows it."
     ),
     responses=errors(413, 422),
 )
@@ -76,8 +78,15 @@ async def create_reference(
                 domain_config = validation.parse_domain(raw)
             except InvalidInput as exc:
                 raise ApiError(422, "invalid_domain", str(exc)) from None
+        # Import and segment detection take up to ~10 s on the longest accepted file, so
+        # they run in a worker thread, off the event loop. Memory is bounded by the limits:
+        # a file over max_reference_frames/joints/duration_s is refused as it is read, before
+        # any frame is stored; an accepted one holds frames x channels values (under 4 x its
+        # max_bvh_bytes) and its kinematics run in ~25 MB chunks (about 150 MB at worst).
         try:
-            derived = await run_in_threadpool(validation.inspect_reference, bvh, domain_config)
+            derived = await run_in_threadpool(
+                validation.inspect_reference, bvh, domain_config, settings
+            )
         except validation.InvalidDomain as exc:
             raise ApiError(422, "invalid_domain", str(exc)) from None
         except InvalidInput as exc:

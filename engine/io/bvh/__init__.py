@@ -8,7 +8,8 @@ given by the user), converts to metres and rotates the world about y so that the
 at frame 0 (DESIGN.md "Frames of reference"). :func:`write_bvh` exports postures of the
 17-joint body so that :func:`load_reference` gives them back.
 
-    parse       read_bvh, parse_bvh: the file's hierarchy and motion, file units (BvhFile)
+    parse       read_bvh, parse_bvh: the file's hierarchy and motion, file units (BvhFile);
+                BvhLimits refuse untrusted files over a size while they are read
     kinematics  the file's local transforms and forward kinematics over all frames
     load        load_reference: mapping onto the 17-joint body, units, heading, T-pose
     sampling    fractional frames and other frame rates (sample_at, sample_reference, ...)
@@ -38,13 +39,14 @@ from engine.io.bvh.load import (
     is_tpose,
     load_reference,
 )
-from engine.io.bvh.parse import BvhFile, parse_bvh, read_bvh
+from engine.io.bvh.parse import BvhFile, BvhLimits, parse_bvh, read_bvh
 from engine.io.bvh.sampling import resample, resample_reference, sample_at, sample_reference
 from engine.io.bvh.write import write_bvh
 
 __all__ = [
     "CMU_UNITS_TO_M",
     "BvhFile",
+    "BvhLimits",
     "Reference",
     "bvh_forward_kinematics",
     "heading_rotation",

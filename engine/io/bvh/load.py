@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -18,10 +18,14 @@ from engine.body.skeleton import JOINT_INDEX, JOINTS
 from engine.errors import InvalidInput
 from engine.io._bvh_names import resolve
 from engine.io.bvh.kinematics import bvh_forward_kinematics
-from engine.io.bvh.parse import BvhFile, read_bvh
+from engine.io.bvh.parse import BvhFile, BvhLimits, read_bvh
 from engine.types import Motion
 
 CMU_UNITS_TO_M = 0.056444
+
+#: Node-frames per forward-kinematics pass (about 25 MB of transforms): memory stays flat
+#: however long the file, and files of a few thousand frames still go in one pass.
+_FK_NODE_FRAMES = 1 << 17
 
 
 @dataclass(frozen=True)
@@ -71,6 +75,7 @@ def load_reference(
     mapping: dict[str, str] | None = None,
     units_to_m: float | None = None,
     normalise_heading: bool = True,
+    limits: BvhLimits | None = None,
 ) -> Reference:
     """Load a BVH reference motion onto the 17-joint body (thesis 2.1.1).
 
@@ -87,6 +92,9 @@ def load_reference(
         Rotate about y (through the origin) so that the body faces +z at frame 0
         (DESIGN.md "Frames of reference"). True for every analysis; False keeps the
         file's own heading.
+    limits : BvhLimits, optional
+        Refuse files with more frames, joints, channels or a longer duration, before their
+        motion is read (:func:`read_bvh`); None reads any file.
 
     Returns
     -------
@@ -95,16 +103,16 @@ def load_reference(
     Raises
     ------
     InvalidInput
-        Malformed file, unknown names in ``mapping``, joints that cannot be mapped (the
-        message names them), or units that cannot be guessed.
+        Malformed file or over ``limits``, unknown names in ``mapping``, joints that
+        cannot be mapped (the message names them), or units that cannot be guessed.
     """
-    bvh = read_bvh(path)
+    bvh = read_bvh(path, limits)
     idx, profile = _mapping(bvh, mapping)
     if units_to_m is None:
         units_to_m = _guess_units(bvh, idx, Path(path).name)
     elif not (isinstance(units_to_m, int | float) and math.isfinite(units_to_m) and units_to_m > 0):
         raise InvalidInput(f"units_to_m must be a positive number, got {units_to_m!r}")
-    joints = bvh_forward_kinematics(bvh)[:, idx] * float(units_to_m)
+    joints = _mapped_positions(bvh, idx) * float(units_to_m)
     R = heading_rotation(joints[0]) if normalise_heading else np.eye(3)
     joints = joints @ R.T
     first = 1 if is_tpose(joints[0]) and bvh.frames > 1 else 0
@@ -119,6 +127,17 @@ def load_reference(
         profile=profile,
         bvh=bvh,
     )
+
+
+def _mapped_positions(bvh: BvhFile, idx: np.ndarray) -> np.ndarray:
+    """World positions (T, len(idx), 3) of the nodes ``idx``, file units, a chunk of frames
+    at a time (frames are independent, so the result is the same as in one pass)."""
+    step = max(1, _FK_NODE_FRAMES // len(bvh.names))
+    chunks = [
+        bvh_forward_kinematics(replace(bvh, values=bvh.values[a : a + step]))[:, idx]
+        for a in range(0, bvh.frames, step)
+    ]
+    return np.concatenate(chunks)
 
 
 def _mapping(bvh: BvhFile, mapping: dict[str, str] | None) -> tuple[np.ndarray, str]:
