@@ -31,6 +31,8 @@ class Settings(BaseSettings):
     worker_concurrency: int = Field(default=1, ge=1, le=64)
     #: Engine settings preset sent with every analysis ("fast" for demos and tests); "" = default.
     engine_preset: str = ""
+    #: Bearer token of ``GET /api/v1/metrics`` (the operator's scraper); empty turns them off.
+    metrics_token: str = ""
     #: Browser origins allowed by CORS; empty (the default) allows none.
     cors_origins: list[str] = []
 

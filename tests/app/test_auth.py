@@ -87,7 +87,7 @@ def test_cors_is_closed_by_default(client):
     assert "access-control-allow-origin" not in r.headers
 
 
-def test_metrics_are_prometheus_text_from_the_workers_files(client, settings):
+def test_metrics_are_prometheus_text_for_the_operators_token_only(client, settings, club):
     from worker import metrics
 
     metrics.configure(settings.data_dir / "metrics")
@@ -95,7 +95,11 @@ def test_metrics_are_prometheus_text_from_the_workers_files(client, settings):
         metrics.inc("coach_analyses_total", state="done")
     finally:
         metrics.configure(None)
-    r = client.get("/api/v1/metrics")
+    assert client.get("/api/v1/metrics").status_code == 404  # off without a token
+    client.app.state.settings.metrics_token = "scrape-me-please-0123"
+    assert client.get("/api/v1/metrics").status_code == 401
+    assert client.get("/api/v1/metrics", headers=club.headers).status_code == 401  # not a club's
+    r = client.get("/api/v1/metrics", headers={"Authorization": "Bearer scrape-me-please-0123"})
     assert r.status_code == 200
     assert r.headers["content-type"].startswith("text/plain")
     assert 'coach_analyses_total{state="done"} 1' in r.text

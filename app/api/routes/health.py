@@ -1,9 +1,12 @@
-from fastapi import APIRouter
+import hmac
+
+from fastapi import APIRouter, Header
 from fastapi.responses import PlainTextResponse
 from sqlalchemy import text
 from sqlalchemy.exc import SQLAlchemyError
 
 from app.api.deps import SessionDep, SettingsDep
+from app.api.errors import ApiError, errors
 from app.schemas import HealthPublic
 
 router = APIRouter(tags=["health"])
@@ -23,8 +26,21 @@ def health(session: SessionDep) -> HealthPublic:
     "/metrics",
     response_class=PlainTextResponse,
     summary="Worker metrics in Prometheus text format (analyses, stage durations, failures)",
+    description=(
+        "For the operator's scraper, not for clubs: counts span every club. Off unless "
+        "`COACH_METRICS_TOKEN` is set; then send `Authorization: Bearer <that token>`."
+    ),
+    responses=errors(401, 404),
 )
-def metrics(settings: SettingsDep) -> str:
+def metrics(settings: SettingsDep, authorization: str | None = Header(None)) -> str:
+    if not settings.metrics_token:
+        raise ApiError(404, "not_found", "metrics are off: set COACH_METRICS_TOKEN to scrape them")
+    sent = (authorization or "").removeprefix("Bearer ").strip()
+    if not hmac.compare_digest(sent.encode(), settings.metrics_token.encode()):
+        raise ApiError(
+            401, "unauthorized", "send the metrics token as Authorization: Bearer <token>",
+            headers={"WWW-Authenticate": "Bearer"},
+        )  # fmt: skip
     # Workers write their counters as files under the data dir (worker.metrics), so the API
     # reads them without a connection to any worker; every worker machine shares that dir.
     from worker.metrics import render_prometheus
