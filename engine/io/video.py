@@ -3,18 +3,28 @@
 Two entry points:
 
 * :func:`probe_video` -- cheap acceptance check for the upload service: opens the file,
-  reads the container's size, rate and duration, decodes the first frames, and refuses the
-  file with :class:`~engine.errors.InvalidInput` when it cannot be used.
+  reads the container's size, rate and duration, decodes the first frames, counts the
+  frames actually in the file without decoding them, and refuses the file with
+  :class:`~engine.errors.InvalidInput` when it cannot be used.
 * :func:`read_video` -- decodes every frame, applies the rotation stored in the file's
   display matrix (phone videos), keeps the real presentation timestamps and scales the
   frames to the working resolution (thesis 5.1 uses 320 x 240 images; default 240 rows).
 
 Frames are returned as RGB ``uint8`` arrays ``(T', H, W, 3)``, rows first.
+
+A header is a claim, not a fact: a file may declare 2 s and hold 5 minutes, or declare 60
+frames and hold 12 (cut short in transfer). Both functions therefore judge the file by what
+it holds. The probe counts the packets and their timestamps, stopping as soon as a limit is
+passed; the decoder counts again, scales each frame to the working size as it comes (no
+full-resolution frame is kept), writes it into one array of at most
+``VideoLimits.max_frames`` frames and stops at the limits too. Memory therefore stays
+bounded by the limits, whatever the header says.
 """
 
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -39,8 +49,16 @@ class VideoLimits:
         Largest accepted file, bytes.
     max_pixels : int
         Largest accepted frame, width x height of the stored frames (4K by default).
+    max_frames : int
+        Most frames, whatever their timestamps say: a minute at 60 frames per second. It
+        bounds the decoded video: 3600 x 426 x 240 x 3 bytes = 1.1 GB at the default working
+        height for 16:9 footage.
     min_frames : int
         Fewest frames: alignment needs at least two.
+    min_complete : float
+        Fewest frames, as a fraction of the count the container declares, for the file to
+        count as whole; fewer means it was cut short (truncated) and it is refused. The
+        slack allows decoders that drop a frame or two at an edit list.
     probe_frames : int
         Frames :func:`probe_video` decodes to prove the file is readable.
     """
@@ -48,7 +66,9 @@ class VideoLimits:
     max_duration_s: float = 60.0
     max_bytes: int = 500 * 1024 * 1024
     max_pixels: int = 3840 * 2160
+    max_frames: int = 3600
     min_frames: int = 2
+    min_complete: float = 0.9
     probe_frames: int = 2
 
 
@@ -63,7 +83,8 @@ class VideoInfo:
     fps : float
         Average frame rate.
     frames : int
-        Frame count (from the container, or estimated from duration x fps).
+        Frame count the container declares (or estimated from duration x fps); the probe
+        has checked that the file holds at least ``min_complete`` of them.
     duration_s : float
     rotation_deg : int
         Counter-clockwise rotation applied to the stored frames for display.
@@ -180,7 +201,8 @@ def probe_video(path: str | os.PathLike, limits: VideoLimits = VideoLimits()) ->
     ------
     InvalidInput
         Missing, empty, unreadable or truncated file; no video stream; fewer than
-        ``limits.min_frames`` frames; over the duration, size or resolution limit.
+        ``limits.min_frames`` frames; over the duration, frame count, size or resolution
+        limit, by its header or by the frames it holds.
     """
     p = _check_file(path, limits)
     container = _open(p)
@@ -204,18 +226,15 @@ def probe_video(path: str | os.PathLike, limits: VideoLimits = VideoLimits()) ->
             raise InvalidInput(
                 f"{p.name} lasts {duration:.1f} s; the limit is {limits.max_duration_s:.0f} s"
             )
-        decoded = []
-        try:
-            for frame in container.decode(stream):
-                decoded.append(frame)
-                if len(decoded) >= max(limits.probe_frames, limits.min_frames):
-                    break
-        except Exception as exc:  # FFmpeg raises many error types for corrupt data
-            if not decoded:
-                raise InvalidInput(f"{p.name} could not be decoded ({exc})") from exc
+        n = int(stream.frames) if stream.frames else int(round(duration * rate))
+        want = max(limits.probe_frames, limits.min_frames)
+        decoded, held, error = _scan(container, stream, p.name, limits, rate, duration, want)
+        if n >= limits.min_frames and held < limits.min_complete * n:
+            raise InvalidInput(_truncated(p.name, held, n, "are in the file"))
+        if not decoded and error is not None:
+            raise InvalidInput(f"{p.name} could not be decoded ({error})") from error
         if not decoded:
             raise InvalidInput(f"{p.name} contains no decodable video frame")
-        n = int(stream.frames) if stream.frames else int(round(duration * rate))
         if len(decoded) < limits.min_frames or n < limits.min_frames:
             raise InvalidInput(
                 f"{p.name} has {max(len(decoded), 0) if len(decoded) < 2 else n} frame(s); "
@@ -238,6 +257,58 @@ def probe_video(path: str | os.PathLike, limits: VideoLimits = VideoLimits()) ->
         container.close()
 
 
+def _scan(
+    container, stream, name: str, limits: VideoLimits, rate: float, declared_s: float, want: int
+) -> tuple[list, int, Exception | None]:
+    """Walk every packet of ``stream`` without decoding it (only the first ``want`` frames
+    are decoded), refusing the file as soon as it holds more than the limits allow.
+
+    Returns the first decoded frames, the number of frames (packets) in the file, and the
+    decoding error that stopped the first frames, if any. The file's length is the span of
+    its packets' timestamps, or the packet count over ``rate`` when they have none.
+    """
+    decoded: list = []
+    error: Exception | None = None
+    held = 0
+    first = last = None
+    tb = stream.time_base
+    for packet in _until_error(container.demux(stream)):
+        if packet.size:
+            held += 1
+            if packet.pts is not None and tb is not None:
+                t = float(packet.pts * tb)
+                first = t if first is None else min(first, t)
+                last = t if last is None else max(last, t)
+            if held > limits.max_frames:
+                raise InvalidInput(_too_many(name, limits))
+            span = last - first if first is not None else (held - 1) / (rate or 30.0)
+            if span > limits.max_duration_s:
+                raise InvalidInput(_too_long(name, limits, declared_s))
+        if len(decoded) < want and error is None:
+            try:  # the last, empty packet flushes the decoder
+                decoded.extend(stream.decode(packet))
+            except Exception as exc:  # FFmpeg raises many error types for corrupt data
+                error = exc
+    return decoded[:want], held, error
+
+
+def _truncated(name: str, got: int, declared: int, verb: str) -> str:
+    return (
+        f"{name} is truncated: {got} of the {declared} frames its header declares {verb}; "
+        "upload the whole file"
+    )
+
+
+def _too_long(name: str, limits: VideoLimits, declared_s: float | None = None) -> str:
+    claim = "" if declared_s is None else f" (its header says {declared_s:.1f} s)"
+    limit = f"{limits.max_duration_s:.0f} s"
+    return f"{name} lasts more than {limit}{claim}; the limit is {limit}"
+
+
+def _too_many(name: str, limits: VideoLimits) -> str:
+    return f"{name} has more than {limits.max_frames} frames; the limit is {limits.max_frames}"
+
+
 def read_video(
     path: str | os.PathLike,
     *,
@@ -254,7 +325,8 @@ def read_video(
         Working image height in pixels; the width keeps the aspect ratio (rounded to even).
         ``0`` keeps the original size.
     limits : VideoLimits
-        Checked by :func:`probe_video` before decoding starts.
+        Checked by :func:`probe_video` before decoding starts, and again on the decoded
+        frames as they come (decoding stops at the first frame past a limit).
     max_frames : int, optional
         Stop after this many frames.
 
@@ -266,7 +338,8 @@ def read_video(
     ------
     InvalidInput
         As :func:`probe_video`, or ``height`` out of range, or the file turns out to hold
-        fewer than ``limits.min_frames`` decodable frames.
+        fewer than ``limits.min_frames`` decodable frames, fewer than ``limits.min_complete``
+        of the frames its header declares (truncated), or more than the limits allow.
     """
     if not isinstance(height, int | np.integer) or not (height == 0 or 32 <= height <= 4320):
         raise InvalidInput(f"height must be 0 (keep) or 32..4320 pixels, got {height!r}")
@@ -275,7 +348,12 @@ def read_video(
     scale = 1.0 if height == 0 else height / info.height
     out_w = info.width if height == 0 else max(2, int(round(info.width * scale / 2.0)) * 2)
     out_h = info.height if height == 0 else int(height)
-    frames, times = _decode(p, (out_h, out_w), scale, max_frames)
+    frames, times, ended = _decode(
+        p, (out_h, out_w), scale, limits, expected=info.frames, rate=info.fps,
+        max_frames=max_frames,
+    )  # fmt: skip
+    if ended and len(frames) < limits.min_complete * info.frames:
+        raise InvalidInput(_truncated(p.name, len(frames), info.frames, "could be decoded"))
     if len(frames) < limits.min_frames:
         raise InvalidInput(
             f"{p.name} has {len(frames)} decodable frame(s); at least {limits.min_frames} are "
@@ -287,7 +365,7 @@ def read_video(
             f"{p.name} lasts {t[-1]:.1f} s; the limit is {limits.max_duration_s:.0f} s"
         )
     return Video(
-        frames=np.stack(frames),
+        frames=frames,
         fps=float(fps),
         timestamps_s=t,
         original_width=info.width,
@@ -298,35 +376,80 @@ def read_video(
 
 
 def _decode(
-    p: Path, size: tuple[int, int], scale: float, max_frames: int | None
-) -> tuple[list[np.ndarray], list[float]]:
-    """Every frame of ``p`` (up to ``max_frames``) as RGB (H, W, 3) uint8 at ``size`` (H, W),
-    turned upright, and its presentation time in seconds (NaN when the file has none).
+    p: Path,
+    size: tuple[int, int],
+    scale: float,
+    limits: VideoLimits,
+    *,
+    expected: int,
+    rate: float,
+    max_frames: int | None,
+) -> tuple[np.ndarray, list[float], bool]:
+    """Every frame of ``p`` (up to ``max_frames``) as RGB uint8 at ``size`` (H, W), turned
+    upright, and its presentation time in seconds (NaN when the file has none).
 
-    ``scale`` (< 1 shrinks) picks the interpolation. A truncated tail ends the decoding
-    quietly: the caller judges whether enough frames came out.
+    Each frame is scaled as it is decoded and written into one array sized for the
+    ``expected`` frames (grown, up to ``limits.max_frames``, if more come), so memory is
+    bounded by the limits, not by the file. Decoding stops with :class:`InvalidInput` at the
+    first frame past ``limits.max_frames`` or ``limits.max_duration_s`` (measured from the
+    first frame's time, or counted at ``rate`` when the file has no times).
+
+    ``scale`` (< 1 shrinks) picks the interpolation. A damaged or truncated tail ends the
+    decoding quietly: the caller judges whether enough frames came out.
+
+    Returns
+    -------
+    frames : ndarray of uint8, shape (T', H, W, 3)
+    times : list of float, length T'
+    ended : bool
+        True when the file ran out (rather than ``max_frames`` being reached).
     """
-    frames: list[np.ndarray] = []
+    most = min(expected, limits.max_frames, max_frames or limits.max_frames)
+    buffer = np.empty((max(1, most), *size, 3), np.uint8)
     times: list[float] = []
     interp = cv2.INTER_AREA if scale < 1 else cv2.INTER_LINEAR
     container = _open(p)
     try:
         stream = container.streams.video[0]
         stream.thread_type = "AUTO"
-        try:
-            for frame in container.decode(stream):
-                rgb = _rotate(frame.to_ndarray(format="rgb24"), int(frame.rotation or 0))
-                if rgb.shape[:2] != size:
-                    rgb = cv2.resize(rgb, (size[1], size[0]), interpolation=interp)
-                frames.append(rgb)
-                times.append(float(frame.time) if frame.time is not None else np.nan)
-                if max_frames is not None and len(frames) >= max_frames:
-                    break
-        except Exception:  # a truncated tail: keep what decoded, judged by the caller
-            pass
+        for frame in _until_error(container.decode(stream)):
+            n = len(times)
+            if n == limits.max_frames:
+                raise InvalidInput(_too_many(p.name, limits))
+            t = float(frame.time) if frame.time is not None else np.nan
+            elapsed = t - times[0] if n and np.isfinite(t - times[0]) else n / (rate or 30.0)
+            if elapsed > limits.max_duration_s:
+                raise InvalidInput(_too_long(p.name, limits))
+            if n == len(buffer):
+                buffer = _grow(buffer, limits.max_frames)
+            rgb = _rotate(frame.to_ndarray(format="rgb24"), int(frame.rotation or 0))
+            if rgb.shape[:2] != size:
+                rgb = cv2.resize(rgb, (size[1], size[0]), interpolation=interp)
+            buffer[n] = rgb
+            times.append(t)
+            if max_frames is not None and n + 1 >= max_frames:
+                return buffer[: n + 1], times, False
     finally:
         container.close()
-    return frames, times
+    return buffer[: len(times)], times, True
+
+
+def _until_error(items: Iterator) -> Iterator:
+    """The packets or frames of a PyAV iterator until it ends or FFmpeg raises: a damaged
+    or truncated tail ends the file quietly, the caller judges what came out."""
+    while True:
+        try:
+            item = next(items)
+        except Exception:  # StopIteration, or one of FFmpeg's many error types
+            return
+        yield item
+
+
+def _grow(buffer: np.ndarray, most: int) -> np.ndarray:
+    """``buffer`` (T, H, W, 3) copied into one twice as long (at most ``most`` frames)."""
+    grown = np.empty((min(2 * len(buffer), most), *buffer.shape[1:]), buffer.dtype)
+    grown[: len(buffer)] = buffer
+    return grown
 
 
 def _timestamps(times: list[float], rate: float) -> tuple[np.ndarray, float]:
