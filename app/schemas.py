@@ -8,7 +8,16 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Annotated, Any, Literal
 
-from pydantic import AnyHttpUrl, BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import (
+    AnyHttpUrl,
+    BaseModel,
+    ConfigDict,
+    Field,
+    TypeAdapter,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 from app.core.validation import engine_domain
 from app.models import segment_names
@@ -17,6 +26,8 @@ from app.models import segment_names
 EMAIL_PATTERN = r"^[^@\s]+@[^@\s]+\.[^@\s]+$"
 
 AnalysisState = Literal["queued", "running", "done", "failed", "cancelled"]
+
+_HTTP_URL = TypeAdapter(AnyHttpUrl)
 
 
 class _Orm(BaseModel):
@@ -53,16 +64,33 @@ class ClubUpdate(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     name: str | None = Field(default=None, min_length=1, max_length=200)
-    #: An http(s) URL, or "" to remove the webhook.
-    webhook_url: AnyHttpUrl | Literal[""] | None = Field(default=None)
-    rotate_webhook_secret: bool = False
+    #: An http(s) URL, or "" to remove the webhook. Whether its host is a public address is
+    #: checked by the route (app.core.webhooks), which knows the service's settings.
+    webhook_url: str | None = Field(
+        default=None,
+        max_length=2000,
+        description='An http or https URL on a public address, or "" to remove the webhook.',
+        json_schema_extra={
+            "anyOf": [
+                {"type": "string", "format": "uri", "maxLength": 2000,
+                 "pattern": "^[hH][tT][tT][pP][sS]?://[^/?#]+"},
+                {"type": "string", "maxLength": 0},
+                {"type": "null"},
+            ]
+        },  # fmt: skip
+    )
+    rotate_webhook_secret: bool = Field(default=False, strict=True)  # JSON true or false
 
-    @field_validator("webhook_url", mode="before")
+    @field_validator("webhook_url")
     @classmethod
-    def _url_length(cls, v: Any) -> Any:
-        if isinstance(v, str) and len(v) > 2000:
-            raise ValueError("webhook_url is longer than 2000 characters")
-        return v
+    def _http_url(cls, v: str | None) -> str | None:
+        """The URL normalised (``HTTP://Example.COM`` -> ``http://example.com/``)."""
+        if not v:
+            return v
+        try:
+            return str(_HTTP_URL.validate_python(v))
+        except ValidationError:
+            raise ValueError('must be an http or https URL, or "" to remove the webhook') from None
 
 
 class ClubUpdated(ClubPublic):

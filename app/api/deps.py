@@ -4,14 +4,14 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import Annotated
+from typing import Annotated, Any
 
 from fastapi import Depends, Query, Request, Security
-from fastapi.security import APIKeyHeader
+from fastapi.security import APIKeyHeader, HTTPAuthorizationCredentials, HTTPBearer
 from sqlalchemy.orm import Session
 
 from app import crud
-from app.api.errors import ApiError
+from app.api.errors import ApiError, invalid
 from app.core import sessions
 from app.core.config import Settings
 from app.core.queue import JobQueue, get_queue
@@ -47,15 +47,18 @@ NotifierDep = Annotated[Notifier, Depends(get_notifier)]
 api_key_header = APIKeyHeader(
     name="X-API-Key", auto_error=False, description="A club API key (POST /api/v1/keys)."
 )
+bearer_header = HTTPBearer(
+    auto_error=False, description="The same API key as `Authorization: Bearer <key>`."
+)
 
 
-def _check_key(request: Request, session: Session, key: str) -> ApiKey:
+def _check_key(request: Request, session: Session, key: str, scheme: str) -> ApiKey:
     """The active API key ``key``, rate limited; 401 or 429 otherwise."""
     row = crud.get_active_api_key(session, key[:200])
     if row is None:
         raise ApiError(
             401, "unauthorized", "the API key is not valid or was revoked",
-            headers={"WWW-Authenticate": "X-API-Key"},
+            headers={"WWW-Authenticate": scheme},
         )  # fmt: skip
     limiter: RateLimiter = request.app.state.rate_limiter
     wait = limiter.take(row.id)
@@ -109,10 +112,18 @@ def get_principal(
     request: Request,
     session: SessionDep,
     key: Annotated[str | None, Security(api_key_header)],
+    bearer: Annotated[HTTPAuthorizationCredentials | None, Security(bearer_header)],
 ) -> Principal:
-    """An ``X-API-Key`` header, else the session cookie; 401 without either."""
-    if key:
-        row = _check_key(request, session, key)
+    """An API key (``X-API-Key`` or ``Authorization: Bearer``), else the session cookie; 401
+    without either. A key that is sent but wrong is a 401, never a fall back to the cookie."""
+    token = bearer.credentials if bearer is not None else None
+    if key and token and key != token:
+        raise ApiError(
+            401, "unauthorized", "X-API-Key and Authorization: Bearer name different keys",
+            headers={"WWW-Authenticate": "Bearer"},
+        )  # fmt: skip
+    if key or token:
+        row = _check_key(request, session, key or token or "", "X-API-Key" if key else "Bearer")
         club = crud.get_club(session, row.club_id)
         if club is None:  # the key outlived its club (cascade should prevent this)
             raise ApiError(401, "unauthorized", "the API key's club no longer exists")
@@ -120,7 +131,8 @@ def get_principal(
     user = _signed_in(request, session)
     if user is None:
         raise ApiError(
-            401, "unauthorized", "an X-API-Key header or a signed-in session is required",
+            401, "unauthorized",
+            "an API key (X-API-Key or Authorization: Bearer) or a signed-in session is required",
             headers={"WWW-Authenticate": "X-API-Key"},
         )  # fmt: skip
     return principal_of(session, user)
@@ -166,6 +178,10 @@ def get_current_user(request: Request, session: SessionDep) -> User:
 CurrentUser = Annotated[User, Depends(get_current_user)]
 
 
+#: The largest page size a server may be configured for (``Settings.max_page_size``).
+MAX_PAGE_SIZE = 1000
+
+
 @dataclass(frozen=True)
 class Page:
     limit: int
@@ -174,15 +190,45 @@ class Page:
 
 def get_page(
     settings: SettingsDep,
-    limit: Annotated[int, Query(ge=1, le=1000, description="Page size.")] = 20,
-    offset: Annotated[int, Query(ge=0, le=1_000_000)] = 0,
+    limit: Annotated[
+        int,
+        Query(
+            ge=1,
+            le=MAX_PAGE_SIZE,
+            description=(
+                "Items per page: 1 to the server's page size limit, `COACH_MAX_PAGE_SIZE` "
+                f"(100 unless the operator changed it; never over {MAX_PAGE_SIZE}). A larger "
+                "limit is refused with 422 giving the limit in `details.max_page_size`."
+            ),
+        ),
+    ] = 20,
+    offset: Annotated[int, Query(ge=0, le=1_000_000, description="Items to skip.")] = 0,
 ) -> Page:
     if limit > settings.max_page_size:
-        raise ApiError(
-            422, "invalid_request", f"limit: at most {settings.max_page_size} items per page",
-            {"max_page_size": settings.max_page_size},
+        raise invalid(
+            "query.limit", f"at most {settings.max_page_size} items per page", "less_than_equal",
+            max_page_size=settings.max_page_size,
         )  # fmt: skip
     return Page(limit=limit, offset=offset)
 
 
 PageDep = Annotated[Page, Depends(get_page)]
+
+
+#: For route decorators of creating routes: documents the ``Location`` of their 201.
+CREATED: dict[int | str, dict[str, Any]] = {
+    201: {
+        "description": "Created",
+        "headers": {
+            "Location": {
+                "description": "The path of the created resource.",
+                "schema": {"type": "string"},
+            }
+        },
+    }
+}
+
+
+def location(request: Request, route: str, **params: object) -> str:
+    """The path of the resource a 201 created (its ``Location``), from its read route."""
+    return request.app.url_path_for(route, **{k: str(v) for k, v in params.items()})

@@ -46,14 +46,42 @@ def new_webhook_secret() -> str:
     return "whsec_" + secrets.token_urlsafe(32)
 
 
-def sign_webhook(body: bytes, secret: str) -> str:
-    """The ``X-Coach-Signature`` header value: ``sha256=<hex HMAC-SHA256 of the body>``."""
-    return "sha256=" + hmac.new(secret.encode(), body, hashlib.sha256).hexdigest()
+#: How far a webhook's ``X-Coach-Timestamp`` may be from the receiver's clock, in seconds.
+WEBHOOK_TOLERANCE_S = 300.0
 
 
-def verify_webhook(body: bytes, secret: str, header: str) -> bool:
-    """What a receiver does: recompute and compare in constant time."""
-    return hmac.compare_digest(sign_webhook(body, secret), header)
+def sign_webhook(body: bytes, secret: str, timestamp: int) -> str:
+    """The ``X-Coach-Signature`` header value of a delivery sent at ``timestamp``.
+
+    ``sha256=<hex HMAC-SHA256 with the secret of "<timestamp>.<body>">``; ``timestamp`` is
+    the ``X-Coach-Timestamp`` header (unix seconds). Signing the time with the body lets a
+    receiver refuse a captured delivery replayed later.
+    """
+    signed = str(int(timestamp)).encode() + b"." + body
+    return "sha256=" + hmac.new(secret.encode(), signed, hashlib.sha256).hexdigest()
+
+
+def verify_webhook(
+    body: bytes,
+    secret: str,
+    signature: str,
+    timestamp: str | int,
+    *,
+    tolerance_s: float = WEBHOOK_TOLERANCE_S,
+    now: float | None = None,
+) -> bool:
+    """What a receiver does: refuse a timestamp more than ``tolerance_s`` seconds from its
+    clock (``now``, default the current time) either way, then recompute the signature and
+    compare in constant time. The body's ``delivery_id`` (also ``X-Coach-Delivery``) is the
+    same for every retry of one event: keep the ids seen within the tolerance to drop
+    repeats."""
+    try:
+        sent = int(str(timestamp).strip())
+    except ValueError:
+        return False
+    if abs((time.time() if now is None else now) - sent) > tolerance_s:
+        return False
+    return hmac.compare_digest(sign_webhook(body, secret, sent), signature)
 
 
 #: File in the data directory holding the generated session secret.

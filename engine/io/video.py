@@ -281,7 +281,10 @@ def _scan(
                 last = t if last is None else max(last, t)
             if held > limits.max_frames:
                 raise InvalidInput(_too_many(name, limits))
-            span = last - first if first is not None else (held - 1) / (rate or 30.0)
+            if first is not None and last is not None:
+                span = last - first
+            else:  # no timestamps: count at the stated rate
+                span = (held - 1) / (rate or 30.0)
             if span > limits.max_duration_s:
                 raise InvalidInput(_too_long(name, limits, declared_s))
         if len(decoded) < want and error is None:

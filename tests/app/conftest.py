@@ -55,15 +55,20 @@ def bvh_file() -> Path:
 
 
 @pytest.fixture
-def settings(tmp_path: Path) -> Settings:
+def settings(request: pytest.FixtureRequest, tmp_path: Path) -> Settings:
+    """Test settings; ``@pytest.mark.settings(name=value)`` changes some for one test."""
+    marker = request.node.get_closest_marker("settings")
     return Settings(
-        data_dir=tmp_path / "data",
-        reflect_interval_s=0,
-        sse_poll_s=0.05,
-        rate_limit_per_s=1000,
-        rate_limit_burst=1000,
-        webhook_backoff_s=0.05,
-        webhook_timeout_s=2,
+        **{
+            "data_dir": tmp_path / "data",
+            "reflect_interval_s": 0,
+            "sse_poll_s": 0.05,
+            "rate_limit_per_s": 1000,
+            "rate_limit_burst": 1000,
+            "webhook_backoff_s": 0.05,
+            "webhook_timeout_s": 2,
+        }
+        | (marker.kwargs if marker else {})
     )
 
 

@@ -284,6 +284,7 @@ class _Receiver(BaseHTTPRequestHandler):
         pass
 
 
+@pytest.mark.settings(webhook_allow_private=True)  # the receiver listens on loopback
 def test_webhook_is_signed_and_retried(client, app, club_ref, queue, video_file):
     server = HTTPServer(("127.0.0.1", 0), _Receiver)
     threading.Thread(target=server.serve_forever, daemon=True).start()
@@ -303,10 +304,12 @@ def test_webhook_is_signed_and_retried(client, app, club_ref, queue, video_file)
         server.shutdown()
     assert len(_Receiver.received) == 1
     headers, body = _Receiver.received[0]
-    assert verify_webhook(body, secret, headers["X-Coach-Signature"])
-    assert not verify_webhook(body + b" ", secret, headers["X-Coach-Signature"])
+    signature, timestamp = headers["X-Coach-Signature"], headers["X-Coach-Timestamp"]
+    assert verify_webhook(body, secret, signature, timestamp)
+    assert not verify_webhook(body + b" ", secret, signature, timestamp)
     payload = json.loads(body)
     assert payload["event"] == "analysis.done" and payload["analysis"]["id"] == a["id"]
+    assert payload["delivery_id"] == headers["X-Coach-Delivery"]
 
 
 def test_api_docs_say_what_one_camera_measures(client):

@@ -17,6 +17,7 @@ from app import crud
 from app.api import access
 from app.api.deps import NotifierDep, SessionDep, principal_of
 from app.api.errors import ApiError
+from app.api.params import DbId
 from app.api.routes.comments import comment_rows
 from app.core import invites, media, sessions
 from app.core.reflect import reflect
@@ -204,7 +205,7 @@ def dashboard(
 @router.get("/performers/{performer_id}/compare", response_class=HTMLResponse)
 def compare_page(
     request: Request,
-    performer_id: int,
+    performer_id: DbId,
     session: SessionDep,
     a: Annotated[str, Query(max_length=36)] = "",
     b: Annotated[str, Query(max_length=36)] = "",

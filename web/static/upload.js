@@ -140,8 +140,9 @@
     const xhr = new XMLHttpRequest();
     xhr.open("POST", "/api/v1/analyses");
     xhr.setRequestHeader("Accept", "application/json");
-    // A retry of the same file reuses the analysis instead of making a second one.
-    xhr.setRequestHeader("Idempotency-Key", [file.name, file.size, file.lastModified, ref.value, Date.now() >> 16].join(":").slice(0, 255));
+    // A retry of the same file reuses the analysis instead of making a second one; the key
+    // names everything sent, since the API refuses a key reused for another upload (409).
+    xhr.setRequestHeader("Idempotency-Key", [file.name, file.size, file.lastModified, ref.value, performer ? performer.value : "", Date.now() >> 16].join(":").slice(0, 255));
     xhr.upload.addEventListener("progress", function (e) {
       if (!e.lengthComputable) return;
       const p = Math.round(100 * e.loaded / e.total);

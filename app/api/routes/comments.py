@@ -4,12 +4,13 @@ from __future__ import annotations
 
 from typing import Any
 
-from fastapi import APIRouter, Response
+from fastapi import APIRouter, Request, Response
 from sqlalchemy import select
 
 from app.api.access import analysis_for
-from app.api.deps import CurrentPrincipal, SessionDep
+from app.api.deps import CREATED, CurrentPrincipal, SessionDep, location
 from app.api.errors import ApiError, errors, not_found
+from app.api.params import DbId
 from app.models import Analysis, Comment
 from app.schemas import CommentCreate, CommentPublic
 
@@ -44,14 +45,23 @@ def list_comments(analysis_id: str, who: CurrentPrincipal, session: SessionDep):
     return [comment_public(c) for c in comment_rows(session, a)]
 
 
+def _comment_of(session, analysis: Analysis, comment_id: int) -> Comment:
+    c = session.get(Comment, comment_id)
+    if c is None or c.analysis_id != analysis.id:
+        raise not_found("comment", comment_id)
+    return c
+
+
 @router.post(
     "", status_code=201, response_model=CommentPublic,
     summary="Comment, on a frame or a segment if given (signed-in users)",
-    responses=errors(403, 422),
+    description="201 with the comment's `Location`.",
+    responses=CREATED | errors(403, 422),
 )  # fmt: skip
 def create_comment(
-    analysis_id: str, body: CommentCreate, who: CurrentPrincipal, session: SessionDep
-):
+    analysis_id: str, body: CommentCreate, who: CurrentPrincipal, session: SessionDep,
+    request: Request, response: Response,
+):  # fmt: skip
     a = analysis_for(session, who, analysis_id)
     user = who.require_user()
     c = Comment(
@@ -60,7 +70,16 @@ def create_comment(
     )  # fmt: skip
     session.add(c)
     session.commit()
+    response.headers["Location"] = location(
+        request, "read_comment", analysis_id=a.id, comment_id=c.id
+    )
     return comment_public(c)
+
+
+@router.get("/{comment_id}", response_model=CommentPublic, summary="One comment")
+def read_comment(analysis_id: str, comment_id: DbId, who: CurrentPrincipal, session: SessionDep):
+    a = analysis_for(session, who, analysis_id)
+    return comment_public(_comment_of(session, a, comment_id))
 
 
 @router.delete(
@@ -68,12 +87,10 @@ def create_comment(
     responses=errors(403),
 )  # fmt: skip
 def delete_comment(
-    analysis_id: str, comment_id: int, who: CurrentPrincipal, session: SessionDep
+    analysis_id: str, comment_id: DbId, who: CurrentPrincipal, session: SessionDep
 ) -> Response:
     a = analysis_for(session, who, analysis_id)
-    c = session.get(Comment, comment_id)
-    if c is None or c.analysis_id != a.id:
-        raise not_found("comment", comment_id)
+    c = _comment_of(session, a, comment_id)
     if not who.is_coach and (who.user is None or c.author_id != who.user.id):
         raise ApiError(403, "forbidden", "you can delete only your own comments")
     session.delete(c)

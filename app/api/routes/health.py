@@ -6,7 +6,7 @@ from sqlalchemy import text
 from sqlalchemy.exc import SQLAlchemyError
 
 from app.api.deps import SessionDep, SettingsDep
-from app.api.errors import ApiError, errors
+from app.api.errors import ApiError, json_errors
 from app.schemas import HealthPublic
 
 router = APIRouter(tags=["health"])
@@ -30,7 +30,7 @@ def health(session: SessionDep) -> HealthPublic:
         "For the operator's scraper, not for clubs: counts span every club. Off unless "
         "`COACH_METRICS_TOKEN` is set; then send `Authorization: Bearer <that token>`."
     ),
-    responses=errors(401, 404),
+    responses=json_errors(401, 404),
 )
 def metrics(settings: SettingsDep, authorization: str | None = Header(None)) -> str:
     if not settings.metrics_token:

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from datetime import timedelta
 
-from fastapi import APIRouter, Request
+from fastapi import APIRouter, Request, Response
 
-from app.api.deps import CurrentCoach, SessionDep, SettingsDep
+from app.api.deps import CREATED, CurrentCoach, SessionDep, SettingsDep
 from app.api.errors import ApiError, errors
 from app.core import invites, sessions
 from app.schemas import InviteCreate, InvitePublic, JoinBody, JoinedPublic
@@ -19,13 +19,18 @@ _INVITE_STATUS = {"unknown": 404, "used": 410, "expired": 410, "invalid": 422}
 @router.post(
     "/invites", status_code=201, response_model=InvitePublic,
     summary="A single-use link for a new performer (the token is in this answer only)",
-    responses=errors(401, 403, 429),
+    description="201 with the link's path (the join page) as its `Location`.",
+    responses=CREATED | errors(401, 403, 429),
 )  # fmt: skip
-def create_invite(body: InviteCreate, request: Request, who: CurrentCoach, session: SessionDep):
+def create_invite(
+    body: InviteCreate, request: Request, response: Response, who: CurrentCoach,
+    session: SessionDep,
+):  # fmt: skip
     invite, token = invites.create_invite(
         session, club_id=who.club.id, created_by=who.user.id if who.user else None,
         display_name=body.display_name, ttl=timedelta(days=body.days),
     )  # fmt: skip
+    response.headers["Location"] = f"/join/{token}"
     return InvitePublic(
         url=str(request.base_url).rstrip("/") + f"/join/{token}",
         path=f"/join/{token}",

@@ -1,8 +1,9 @@
-from fastapi import APIRouter, Response
+from fastapi import APIRouter, Request, Response
 
 from app import crud
-from app.api.deps import CoachClub, SessionDep
+from app.api.deps import CREATED, CoachClub, SessionDep, location
 from app.api.errors import errors, not_found
+from app.api.params import DbId
 from app.schemas import ApiKeyCreate, ApiKeyCreated, ApiKeyPublic
 
 router = APIRouter(prefix="/keys", tags=["keys"], responses=errors(401, 429))
@@ -13,10 +14,19 @@ router = APIRouter(prefix="/keys", tags=["keys"], responses=errors(401, 429))
     status_code=201,
     response_model=ApiKeyCreated,
     summary="Create another API key for the club (the key is shown once)",
-    responses=errors(422),
+    description="201 with the key's `Location`. Send it as `X-API-Key: <key>` or "
+    "`Authorization: Bearer <key>`.",
+    responses=CREATED | errors(422),
 )
-def create_key(club: CoachClub, session: SessionDep, body: ApiKeyCreate | None = None):
+def create_key(
+    club: CoachClub,
+    session: SessionDep,
+    request: Request,
+    response: Response,
+    body: ApiKeyCreate | None = None,
+):
     row, key = crud.create_api_key(session, club_id=club.id, name=(body.name if body else ""))
+    response.headers["Location"] = location(request, "read_key", key_id=row.id)
     return ApiKeyCreated(**ApiKeyPublic.model_validate(row).model_dump(), key=key)
 
 
@@ -25,8 +35,19 @@ def list_keys(club: CoachClub, session: SessionDep):
     return crud.list_api_keys(session, club_id=club.id)
 
 
+@router.get(
+    "/{key_id}", response_model=ApiKeyPublic, summary="One key (its prefix only)",
+    responses=errors(404),
+)  # fmt: skip
+def read_key(key_id: DbId, club: CoachClub, session: SessionDep):
+    row = crud.get_api_key(session, club_id=club.id, key_id=key_id)
+    if row is None:
+        raise not_found("API key", key_id)
+    return row
+
+
 @router.delete("/{key_id}", status_code=204, summary="Revoke a key", responses=errors(404))
-def revoke_key(key_id: int, club: CoachClub, session: SessionDep) -> Response:
+def revoke_key(key_id: DbId, club: CoachClub, session: SessionDep) -> Response:
     row = crud.get_api_key(session, club_id=club.id, key_id=key_id)
     if row is None:
         raise not_found("API key", key_id)

@@ -1,11 +1,20 @@
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Query
+from fastapi import APIRouter, Query, Request, Response
 
 from app import crud
 from app.api.access import analysis_for, done_analysis, performer_for, result_of
-from app.api.deps import CoachClub, CurrentPrincipal, NotifierDep, PageDep, SessionDep
+from app.api.deps import (
+    CREATED,
+    CoachClub,
+    CurrentPrincipal,
+    NotifierDep,
+    PageDep,
+    SessionDep,
+    location,
+)
 from app.api.errors import ApiError, errors
+from app.api.params import DbId
 from app.core import compare
 from app.core.reflect import reflect
 from app.core.summary import segment_names
@@ -17,15 +26,18 @@ router = APIRouter(prefix="/performers", tags=["performers"], responses=errors(4
 
 @router.post(
     "", status_code=201, response_model=UserPublic, summary="Add a performer to the club",
-    responses=errors(409, 422),
+    description="201 with the performer's `Location`.", responses=CREATED | errors(409, 422),
 )  # fmt: skip
-def create_performer(body: PerformerCreate, club: CoachClub, session: SessionDep):
+def create_performer(
+    body: PerformerCreate, club: CoachClub, session: SessionDep, request: Request,
+    response: Response,
+):  # fmt: skip
     if crud.get_user_by_email(session, club_id=club.id, email=body.email) is not None:
         raise ApiError(
             409, "conflict", f"a user with email {body.email} already exists in this club",
             {"email": body.email},
         )  # fmt: skip
-    return crud.create_user(
+    user = crud.create_user(
         session,
         club_id=club.id,
         role="performer",
@@ -33,11 +45,21 @@ def create_performer(body: PerformerCreate, club: CoachClub, session: SessionDep
         display_name=body.display_name,
         password=body.password,
     )
+    response.headers["Location"] = location(request, "read_performer", performer_id=user.id)
+    return user
 
 
 @router.get("", response_model=list[UserPublic], summary="The club's performers")
 def list_performers(club: CoachClub, session: SessionDep, page: PageDep):
     return crud.list_performers(session, club_id=club.id, limit=page.limit, offset=page.offset)
+
+
+@router.get(
+    "/{performer_id}", response_model=UserPublic, summary="One performer",
+    responses=errors(404),
+)  # fmt: skip
+def read_performer(performer_id: DbId, who: CurrentPrincipal, session: SessionDep):
+    return performer_for(session, who, performer_id)
 
 
 def _history(session, performer: User, notifier) -> list[dict[str, Any]]:
@@ -63,7 +85,7 @@ def _history(session, performer: User, notifier) -> list[dict[str, Any]]:
     responses=errors(404),
 )  # fmt: skip
 def performer_history(
-    performer_id: int, who: CurrentPrincipal, session: SessionDep, notifier: NotifierDep
+    performer_id: DbId, who: CurrentPrincipal, session: SessionDep, notifier: NotifierDep
 ) -> dict[str, Any]:
     p = performer_for(session, who, performer_id)
     return {
@@ -85,7 +107,7 @@ def _attempt(a: Analysis) -> dict[str, Any]:
     responses=errors(404, 409, 422),
 )
 def compare_attempts(
-    performer_id: int,
+    performer_id: DbId,
     who: CurrentPrincipal,
     session: SessionDep,
     notifier: NotifierDep,

@@ -2,21 +2,24 @@ import json
 from pathlib import Path
 from typing import Annotated
 
-from fastapi import APIRouter, File, Form, Response, UploadFile
+from fastapi import APIRouter, File, Form, Request, Response, UploadFile
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse
 
 from app import crud
 from app.api.access import reference_for
 from app.api.deps import (
+    CREATED,
     CurrentCoach,
     CurrentPrincipal,
     PageDep,
     SessionDep,
     SettingsDep,
     StorageDep,
+    location,
 )
 from app.api.errors import ApiError, errors
+from app.api.params import DbId
 from app.core import media, validation
 from app.core.storage import Storage, UploadTooLarge
 from app.schemas import DomainUpdate, ReferencePublic
@@ -48,11 +51,14 @@ def too_large(what: str, limit: int) -> ApiError:
         "motion, or names that do not match the number of segments, are refused with 422 "
         "`invalid_domain`. A file with more frames, joints or a longer duration than the "
         "service's limits (`COACH_MAX_REFERENCE_FRAMES`, `_JOINTS`, `_DURATION_S`) is refused "
-        "with 422 `invalid_reference` as soon as its header shows it."
+        "with 422 `invalid_reference` as soon as its header shows it. 201 with the "
+        "reference's `Location`."
     ),
-    responses=errors(413, 422),
+    responses=CREATED | errors(413, 422),
 )
 async def create_reference(
+    request: Request,
+    response: Response,
     who: CurrentCoach,
     session: SessionDep,
     settings: SettingsDep,
@@ -98,6 +104,7 @@ async def create_reference(
         ref.domain_config = domain_config
         ref.derived = derived
         session.commit()
+        response.headers["Location"] = location(request, "read_reference", reference_id=ref.id)
         return ref
     except BaseException:
         session.rollback()
@@ -116,7 +123,7 @@ def list_references(who: CurrentPrincipal, session: SessionDep, page: PageDep):
     "/{reference_id}", response_model=ReferencePublic, summary="One reference",
     responses=errors(404),
 )  # fmt: skip
-def read_reference(reference_id: int, who: CurrentPrincipal, session: SessionDep):
+def read_reference(reference_id: DbId, who: CurrentPrincipal, session: SessionDep):
     return reference_for(session, who, reference_id)
 
 
@@ -126,7 +133,7 @@ def read_reference(reference_id: int, who: CurrentPrincipal, session: SessionDep
     responses=errors(403, 404, 422),
 )  # fmt: skip
 def update_domain(
-    reference_id: int, body: DomainUpdate, who: CurrentCoach, session: SessionDep
+    reference_id: DbId, body: DomainUpdate, who: CurrentCoach, session: SessionDep
 ):  # fmt: skip
     ref = reference_for(session, who, reference_id)
     config = dict(ref.domain_config or {})
@@ -160,7 +167,7 @@ _PICTURE_HEADERS = {"Cache-Control": "private, max-age=300"}
     "/{reference_id}/thumbnail.svg", summary="The first posture, drawn",
     responses={200: {"content": {"image/svg+xml": {}}}} | errors(404),
 )  # fmt: skip
-async def reference_thumbnail(reference_id: int, who: CurrentPrincipal, session: SessionDep):
+async def reference_thumbnail(reference_id: DbId, who: CurrentPrincipal, session: SessionDep):
     ref = reference_for(session, who, reference_id)
     first = int((ref.derived or {}).get("first_motion_frame") or 0)
     svg = await run_in_threadpool(media.reference_thumbnail, ref.bvh_path, first)
@@ -171,7 +178,7 @@ async def reference_thumbnail(reference_id: int, who: CurrentPrincipal, session:
     "/{reference_id}/strip.svg", summary="One posture per segment, drawn",
     responses={200: {"content": {"image/svg+xml": {}}}} | errors(404),
 )  # fmt: skip
-async def reference_strip(reference_id: int, who: CurrentPrincipal, session: SessionDep):
+async def reference_strip(reference_id: DbId, who: CurrentPrincipal, session: SessionDep):
     ref = reference_for(session, who, reference_id)
     derived = ref.derived or {}
     svg = await run_in_threadpool(
@@ -186,7 +193,7 @@ async def reference_strip(reference_id: int, who: CurrentPrincipal, session: Ses
     summary="Sampled postures (front and side view) for a looping preview",
     responses=errors(404),
 )
-async def reference_preview(reference_id: int, who: CurrentPrincipal, session: SessionDep):
+async def reference_preview(reference_id: DbId, who: CurrentPrincipal, session: SessionDep):
     ref = reference_for(session, who, reference_id)
     derived = ref.derived or {}
     data = await run_in_threadpool(
@@ -201,7 +208,7 @@ async def reference_preview(reference_id: int, who: CurrentPrincipal, session: S
     responses=errors(403, 404, 409),
 )  # fmt: skip
 def delete_reference(
-    reference_id: int, who: CurrentCoach, session: SessionDep, storage: StorageDep
+    reference_id: DbId, who: CurrentCoach, session: SessionDep, storage: StorageDep
 ) -> Response:
     ref = reference_for(session, who, reference_id)
     if crud.reference_in_use(session, ref):
