@@ -10,6 +10,7 @@ from __future__ import annotations
 import logging
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
+from functools import partial
 from importlib.metadata import entry_points
 
 from fastapi import FastAPI
@@ -24,8 +25,10 @@ from app.api.middleware import (
     SecurityHeadersMiddleware,
 )
 from app.api.routes import api_router
+from app.core import recovery
 from app.core.config import Settings, get_settings
 from app.core.db import make_engine, make_sessionmaker, run_migrations
+from app.core.queue import get_queue
 from app.core.ratelimit import RateLimiter, SignInThrottle
 from app.core.reflect import Notifier, Reflector
 from app.core.security import stored_secret
@@ -47,7 +50,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         reflector = None
         if settings.reflect_interval_s > 0:
-            reflector = Reflector(sessions, notifier, settings.reflect_interval_s)
+            # Each tick also queues lost analyses again (app.core.recovery).
+            recover = partial(recovery.recover, settings=settings, queue=get_queue())
+            reflector = Reflector(sessions, notifier, settings.reflect_interval_s, recover)
             reflector.start()
         try:
             yield

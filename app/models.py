@@ -155,7 +155,13 @@ class Analysis(Base):
     result_path: Mapped[str | None] = mapped_column(String(1000), default=None)
     timings: Mapped[dict | None] = mapped_column(JSON, default=None)
     task_id: Mapped[str | None] = mapped_column(String(255), default=None)
+    #: Times recovery queued the analysis again (its publish, worker or broker message was
+    #: lost: app.core.recovery); also the claim that keeps two API processes from both doing it.
+    recoveries: Mapped[int] = mapped_column(Integer, default=0, server_default="0")
     idempotency_key: Mapped[str | None] = mapped_column(String(255), default=None)
+    #: sha256 hex of what the upload sent under that key (reference, performer, video), so
+    #: the key reused for a different upload is refused (None: made before it was kept).
+    idempotency_fingerprint: Mapped[str | None] = mapped_column(String(64), default=None)
     #: Set when the completion webhook was handed to the sender (so it fires once).
     notified_at: Mapped[datetime | None] = mapped_column(UTCDateTime(), default=None)
     created_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)

@@ -17,7 +17,8 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 #: File names inside an analysis folder (worker.contract.AnalysisFolder).
 FOLDER_NAMES = re.compile(
-    r"^(status\.json|result\.json|tasks\.json|prepare\.npz|stages|cancel)$|^candidates-|\.npz$"
+    r"^(status\.json|result\.json|tasks\.json|prepare\.npz|stages|cancel|heartbeat|attempts)$"
+    r"|^candidates-|\.npz$"
 )
 
 

@@ -1,20 +1,26 @@
-"""The Celery application, configured from :mod:`worker.settings`, and the API's two calls.
+"""The Celery application, configured from :mod:`worker.settings`, and the API's calls.
 
 ``celery -A worker.celery_app worker`` (or ``coach worker``) runs it. The API calls only
-:func:`enqueue` and :func:`revoke` (and reads status.json / result.json in the analysis folder).
+:func:`enqueue`, :func:`revoke` and :func:`broker_tasks` (and reads status.json, result.json and
+the heartbeat in the analysis folder).
 
 Delivery guarantees, and why each setting:
 
 - ``task_acks_late`` + ``task_reject_on_worker_lost``: a message is acknowledged only when its
-  task finished, so a worker that dies mid-stage (OOM, SIGKILL, lost machine) leaves the message
-  to be delivered again. That is safe because every task is idempotent: a stage whose output
-  exists is skipped and outputs appear only by atomic rename (:mod:`worker.jobs`).
+  task finished, so a pool process that dies mid-stage (OOM, segfault) has its message handed
+  out again at once. That is safe because every task is idempotent: a stage whose output
+  exists is skipped and outputs appear only by atomic rename (:mod:`worker.jobs`); a stage that
+  killed its process ``max_crashes`` times is failed instead (:mod:`worker.lease`).
 - ``worker_prefetch_multiplier = 1``: stages run for minutes; a worker must not hoard messages
   other idle workers could run.
 - Redis ``visibility_timeout`` (default 2 h): Redis redelivers an unacknowledged message once this
   has passed, whether or not the first worker is still running it. It must exceed the longest
   task (31 min hard limit) plus the longest retry countdown (10 min), or long stages would be
-  duplicated on a second worker while still running.
+  duplicated on a second worker while still running. It no longer bounds recovery: when a
+  whole worker dies (SIGKILL, lost machine) or Redis restarts and forgets every message, the
+  analysis' heartbeat stops and the API queues it again once the heartbeat is ``lost_after_s``
+  old (60 s; a queued analysis Redis forgot after ``publish_grace_s``, 30 s), within one
+  reflector tick (``app.core.recovery``).
 - ``worker_cancel_long_running_tasks_on_connection_loss``: with late acks a task whose worker lost
   the broker connection is redelivered anyway; cancelling it avoids running it twice.
 """
@@ -31,7 +37,7 @@ from celery import Celery
 from kombu import pools
 
 from worker import metrics
-from worker.contract import ANALYZE_TASK, AnalysisFolder, AnalysisJob
+from worker.contract import ANALYZE_TASK, AnalysisFolder, AnalysisJob, BrokerTasks
 from worker.settings import WorkerSettings
 
 log = logging.getLogger("coach.worker")
@@ -172,6 +178,48 @@ def revoke(task_id: str) -> None:
     except Exception as exc:  # broadcast is best effort; the marker is what guarantees the stop
         log.warning("analysis.revoke_broadcast_failed task_id=%s error=%s", task_id, exc)
     log.info("analysis.revoked task_id=%s work_dir=%s", task_id, work_dir)
+
+
+def broker_tasks() -> BrokerTasks | None:
+    """The ids of the tasks the broker holds now; None when it cannot be asked (down).
+
+    Redis (kombu's transport) keeps waiting messages in a list named after the queue (the
+    tasks set no priority, so one list) and delivered, unacknowledged ones in a hash; the
+    embedded transport keeps waiting messages as files and forgets delivered ones.
+    """
+    settings = current_settings()
+    try:
+        if settings.embedded:
+            return BrokerTasks(_folder_task_ids(settings.broker_dir / "queue"), None)
+        with app.connection_for_read() as conn:
+            channel = conn.default_channel
+            pipe = channel.client.pipeline()
+            pipe.lrange(app.conf.task_default_queue, 0, -1)
+            pipe.hvals(channel.unacked_key)
+            waiting, unacked = pipe.execute()
+    except Exception as exc:  # kombu/redis raise many types; all mean "cannot tell now"
+        log.warning("broker.unreadable error=%s", exc)
+        return None
+    held = [json.loads(raw)[0] for raw in unacked]  # [message, exchange, routing key]
+    return BrokerTasks(
+        frozenset(filter(None, (_task_id(json.loads(raw)) for raw in waiting))),
+        frozenset(filter(None, (_task_id(m) for m in held))),
+    )
+
+
+def _task_id(message: dict) -> str | None:
+    headers, properties = message.get("headers") or {}, message.get("properties") or {}
+    return headers.get("id") or properties.get("correlation_id")
+
+
+def _folder_task_ids(folder: Path) -> frozenset[str]:
+    ids: set[str | None] = set()
+    for path in folder.glob("*.msg"):
+        try:
+            ids.add(_task_id(json.loads(path.read_bytes())))
+        except (OSError, ValueError):
+            continue  # taken by a worker while we listed the folder
+    return frozenset(i for i in ids if i)
 
 
 configure()

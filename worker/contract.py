@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import os
 import re
+import time
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
@@ -82,12 +83,18 @@ class AnalysisFolder:
                           "updated": iso time}, replaced atomically on every change
         video.<ext>      the performer's upload, as the app stored it
         result.json      the DESIGN.md result, present once the analysis is done
-        cancel           marker: the analysis was cancelled
+        cancel           marker: the analysis was cancelled (or failed for good): messages
+                         still queued for it stop
         tasks.json       the Celery task ids of the analysis' canvas
+        heartbeat        {"owner": entry task id, "host", "pid"}; its modification time is
+                         renewed every few seconds while any task of the analysis runs (the
+                         lease: older than ``lost_after_s`` means nobody runs it)
         stages/          one output per finished engine stage (a stage whose output exists
                          is skipped):
             prepare.npz                  stages 0-2
             candidates-<i>-of-<n>.npz    stage 3, chunk i of n
+        attempts/        per stage output, how many started runs never came back (the
+                         worker process died): ``attempts/<output stem>``, a count
 
     Writers write to a temporary name holding ``.tmp`` and rename (:func:`is_temporary`).
     """
@@ -100,6 +107,7 @@ class AnalysisFolder:
         self.result = self.work_dir / "result.json"
         self.cancel = self.work_dir / "cancel"
         self.tasks = self.work_dir / "tasks.json"
+        self.heartbeat = self.work_dir / "heartbeat"
         self.stages = self.work_dir / "stages"
         self.prepared = self.stages / "prepare.npz"
 
@@ -110,6 +118,19 @@ class AnalysisFolder:
     def chunk(self, index: int, n_chunks: int) -> Path:
         """Stage 3's output for chunk ``index`` of ``n_chunks``."""
         return self.stages / f"candidates-{index}-of-{n_chunks}.npz"
+
+    def attempts(self, output: Path) -> Path:
+        """The crash count of the stage that writes ``output`` (one of the paths above)."""
+        return self.work_dir / "attempts" / output.stem
+
+    def heartbeat_age_s(self, now: float | None = None) -> float | None:
+        """Seconds since a task of the analysis last renewed its heartbeat; None if no task
+        ever ran. Negative while a retry countdown holds the lease into the future."""
+        try:
+            renewed = self.heartbeat.stat().st_mtime
+        except OSError:
+            return None
+        return (time.time() if now is None else now) - renewed
 
     def chunks(self, n_chunks: int) -> list[Path]:
         return [self.chunk(i, n_chunks) for i in range(n_chunks)]
@@ -122,6 +143,23 @@ class AnalysisFolder:
             p for p in self.stages.iterdir()
             if self._CHUNK.fullmatch(p.name) and not is_temporary(p)
         )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class BrokerTasks:
+    """The task ids the broker holds at one moment (:func:`worker.celery_app.broker_tasks`).
+
+    Attributes
+    ----------
+    waiting : frozenset of str
+        Messages in the queue that no worker has taken yet.
+    held : frozenset of str or None
+        Messages a worker took and has not acknowledged (running, or waiting for a retry's
+        countdown); None where the transport cannot tell (the embedded one).
+    """
+
+    waiting: frozenset[str]
+    held: frozenset[str] | None
 
 
 def is_temporary(path: Path) -> bool:

@@ -7,7 +7,8 @@ broker. The same task code runs as in the scaled-out deployment.
 Limits of the filesystem transport, and what covers them: it hands a message to one consumer
 and deletes it from the folder, so a worker killed with SIGKILL loses the message it held (a
 warm stop puts unacknowledged messages back). The analysis folder keeps every finished stage,
-so enqueuing the analysis again resumes it.
+so enqueuing the analysis again resumes it: the API's recovery does so once the analysis'
+heartbeat is ``lost_after_s`` old (``app.core.recovery``), and ``coach serve`` at start.
 """
 
 from __future__ import annotations
@@ -114,7 +115,8 @@ def running() -> bool:
 
 
 def stop(timeout: float = 10.0) -> None:
-    """Stop the worker: a warm shutdown (SIGTERM) for ``timeout`` s, then SIGKILL.
+    """Stop the worker: a warm shutdown (SIGTERM) for ``timeout`` s, then SIGTERM to its pool
+    processes, then SIGKILL.
 
     A warm shutdown lets the current stage finish only within ``timeout``; anything cut short is
     resumed from its last finished stage when the analysis is enqueued again.
@@ -128,11 +130,24 @@ def stop(timeout: float = 10.0) -> None:
             proc.send_signal(signal.SIGTERM)
             proc.wait(timeout)
         except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait(5)
+            _kill_group(proc)
         except ProcessLookupError:
             pass
         log.info("worker.embedded_stopped pid=%s code=%s", proc.pid, proc.returncode)
     if _log_file is not None:
         _log_file.close()
         _log_file = None
+
+
+def _kill_group(proc: subprocess.Popen) -> None:
+    # SIGTERM first: a running stage unwinds (worker.lease), so being stopped does not count
+    # as a run that killed its worker; SIGKILL whatever is left.
+    for sig, wait_s in ((signal.SIGTERM, 3), (signal.SIGKILL, 5)):
+        try:
+            os.killpg(proc.pid, sig)
+            proc.wait(wait_s)
+            return
+        except subprocess.TimeoutExpired:
+            continue
+        except ProcessLookupError:
+            return

@@ -17,6 +17,9 @@ Because finished outputs are skipped, a redelivered or retried task resumes wher
 attempt stopped, and two deliveries of the same task cannot corrupt each other (each writes its
 own temporary file; the rename is atomic and both renames carry equivalent content).
 
+Each stage's engine work runs inside :func:`worker.lease.attempt`, which counts runs that
+killed their worker: at ``max_crashes`` the stage fails with ``RepeatedCrash`` instead.
+
 Progress goes to ``status.json`` (what the API reads) and to an optional ``publish(meta)``
 callback (the Celery task's ``update_state``). A ``cancel`` marker file in the analysis folder
 is checked between stages and on every progress callback from the engine, so a cancelled
@@ -44,7 +47,7 @@ from engine import pipeline as engine_pipeline
 from engine.errors import EngineError
 from engine.reference.domain import Domain
 from engine.settings import Settings
-from worker import metrics
+from worker import lease, metrics
 from worker.contract import AnalysisFolder, AnalysisJob
 
 log = logging.getLogger("coach.worker")
@@ -56,6 +59,9 @@ _SPAN = {"prepare": (0.0, 0.35), "candidates": (0.35, 0.90), "select": (0.90, 1.
 
 #: How often (seconds) engine progress callbacks may rewrite status.json.
 _STATUS_INTERVAL_S = 0.5
+
+#: Runs of one stage that may kill their worker before it is failed (worker.settings).
+MAX_CRASHES = 2
 
 Publish = Callable[[dict], None]
 
@@ -272,6 +278,9 @@ def start(job: AnalysisJob) -> bool:
     if paths.result.exists():
         write_status(job.work_dir, "done", stage="select", progress=1.0, message="done", force=True)
         return False
+    if (read_status(job.work_dir) or {}).get("state") == "failed":
+        # A late duplicate of a failed run (enqueue resets the status for a deliberate new one).
+        return False
     write_status(
         job.work_dir, "running", stage="queued", progress=0.0, message="started", force=True
     )
@@ -280,24 +289,29 @@ def start(job: AnalysisJob) -> bool:
 
 
 def run_prepare(
-    job: AnalysisJob, *, pipeline: ModuleType = engine_pipeline, publish: Publish | None = None
+    job: AnalysisJob,
+    *,
+    pipeline: ModuleType = engine_pipeline,
+    publish: Publish | None = None,
+    max_crashes: int = MAX_CRASHES,
 ) -> Path:
     """Stages 0-2 (foreground, calibration, approximate alignment) -> ``stages/prepare.npz``."""
     paths = AnalysisFolder(job.work_dir)
     if paths.prepared.exists():
         return _skipped(job, "prepare", paths.prepared)
     check_cancel(job)
-    progress = Progress(job, "prepare", *_SPAN["prepare"], publish)
-    progress.report("prepare", _SPAN["prepare"][0], "preparing")
-    started = time.monotonic()
-    settings, domain = engine_inputs(job, pipeline)
-    prepared = pipeline.prepare(
-        job.reference_path, job.video_path, settings, domain=domain,
-        mapping=job.reference_mapping, units_to_m=job.reference_units_to_m,
-        on_progress=progress,
-    )  # fmt: skip
-    check_cancel(job)
-    write_atomic(paths.prepared, prepared.save)
+    with lease.attempt(job.work_dir, paths.prepared, max_crashes=max_crashes):
+        progress = Progress(job, "prepare", *_SPAN["prepare"], publish)
+        progress.report("prepare", _SPAN["prepare"][0], "preparing")
+        started = time.monotonic()
+        settings, domain = engine_inputs(job, pipeline)
+        prepared = pipeline.prepare(
+            job.reference_path, job.video_path, settings, domain=domain,
+            mapping=job.reference_mapping, units_to_m=job.reference_units_to_m,
+            on_progress=progress,
+        )  # fmt: skip
+        check_cancel(job)
+        write_atomic(paths.prepared, prepared.save)
     _stage_done(job, "prepare", started)
     return paths.prepared
 
@@ -309,6 +323,7 @@ def run_candidates(
     *,
     pipeline: ModuleType = engine_pipeline,
     publish: Publish | None = None,
+    max_crashes: int = MAX_CRASHES,
 ) -> Path:
     """Stage 3 on chunk ``index`` of ``n_chunks`` -> ``stages/candidates-<i>-of-<n>.npz``."""
     if not 0 <= index < n_chunks:
@@ -318,6 +333,15 @@ def run_candidates(
     if out.exists():
         return _skipped(job, "candidates", out)
     check_cancel(job)
+    with lease.attempt(job.work_dir, out, max_crashes=max_crashes):
+        return _candidates(job, index, n_chunks, pipeline=pipeline, publish=publish)
+
+
+def _candidates(
+    job: AnalysisJob, index: int, n_chunks: int, *, pipeline: ModuleType, publish: Publish | None
+) -> Path:
+    paths = AnalysisFolder(job.work_dir)
+    out = paths.chunk(index, n_chunks)
     prepared = pipeline.Prepared.load(paths.prepared)
     ranges = prepared.chunks(n_chunks)
     if index >= len(ranges):
@@ -358,6 +382,7 @@ def run_select(
     pipeline: ModuleType = engine_pipeline,
     publish: Publish | None = None,
     on_result: Callable[[Path], None] | None = None,
+    max_crashes: int = MAX_CRASHES,
 ) -> Path:
     """Stage 4 (selection, errors) over every chunk -> ``result.json``; status becomes done.
 
@@ -369,21 +394,8 @@ def run_select(
         _skipped(job, "select", paths.result)
     else:
         check_cancel(job)
-        prepared = pipeline.Prepared.load(paths.prepared)
-        expected = paths.chunks(n_chunks)[: len(prepared.chunks(n_chunks))]
-        missing = [p.name for p in expected if not p.exists()]
-        if missing:
-            raise FileNotFoundError(f"stage-3 outputs missing: {', '.join(missing)}")
-        chunks = [pipeline.CandidateChunk.load(p) for p in expected]
-        progress = Progress(job, "select", *_SPAN["select"], publish)
-        progress.report("select", _SPAN["select"][0], "selecting")
-        started = time.monotonic()
-        settings, _ = engine_inputs(job, pipeline)
-        result = pipeline.select(prepared, chunks, settings, on_progress=progress)
-        check_cancel(job)
-        result.setdefault("analysis_id", job.analysis_id)
-        write_json_atomic(paths.result, result)
-        _stage_done(job, "select", started)
+        with lease.attempt(job.work_dir, paths.result, max_crashes=max_crashes):
+            _select(job, n_chunks, pipeline=pipeline, publish=publish)
     if on_result is not None:
         on_result(paths.result)
     if write_status(job.work_dir, "done", stage="select", progress=1.0, message="done"):
@@ -392,25 +404,49 @@ def run_select(
     return paths.result
 
 
+def _select(
+    job: AnalysisJob, n_chunks: int, *, pipeline: ModuleType, publish: Publish | None
+) -> None:
+    paths = AnalysisFolder(job.work_dir)
+    prepared = pipeline.Prepared.load(paths.prepared)
+    expected = paths.chunks(n_chunks)[: len(prepared.chunks(n_chunks))]
+    missing = [p.name for p in expected if not p.exists()]
+    if missing:
+        raise FileNotFoundError(f"stage-3 outputs missing: {', '.join(missing)}")
+    chunks = [pipeline.CandidateChunk.load(p) for p in expected]
+    progress = Progress(job, "select", *_SPAN["select"], publish)
+    progress.report("select", _SPAN["select"][0], "selecting")
+    started = time.monotonic()
+    settings, _ = engine_inputs(job, pipeline)
+    result = pipeline.select(prepared, chunks, settings, on_progress=progress)
+    check_cancel(job)
+    result.setdefault("analysis_id", job.analysis_id)
+    write_json_atomic(paths.result, result)
+    _stage_done(job, "select", started)
+
+
 def run_all(
     job: AnalysisJob,
     n_chunks: int,
     *,
     pipeline: ModuleType = engine_pipeline,
     publish: Publish | None = None,
+    max_crashes: int = MAX_CRASHES,
 ) -> Path:
     """Every stage in order in this process (embedded sequential mode); returns result.json.
 
-    Engine errors and cancellation are recorded on the analysis before they propagate.
+    Engine errors, repeated crashes and cancellation are recorded on the analysis before they
+    propagate.
     """
+    run = {"pipeline": pipeline, "publish": publish, "max_crashes": max_crashes}
     try:
         if not start(job):
             return AnalysisFolder(job.work_dir).result
-        run_prepare(job, pipeline=pipeline, publish=publish)
+        run_prepare(job, **run)
         for i in range(n_chunks):
-            run_candidates(job, i, n_chunks, pipeline=pipeline, publish=publish)
-        return run_select(job, n_chunks, pipeline=pipeline, publish=publish)
-    except (EngineError, Cancelled) as exc:
+            run_candidates(job, i, n_chunks, **run)
+        return run_select(job, n_chunks, **run)
+    except (EngineError, Cancelled, lease.RepeatedCrash) as exc:
         record_failure(job, exc)
         raise
 
@@ -434,6 +470,10 @@ def record_failure(job: AnalysisJob, exc: BaseException, *, stage: str | None = 
             message=error,
             error=error,
         )
+        if isinstance(exc, lease.RepeatedCrash):
+            # Messages of the analysis still queued (a sibling chunk, a late redelivery) stop
+            # at the marker instead of killing more workers; the status stays failed.
+            request_cancel(job.work_dir)
     if counted:  # once per analysis, however many chunks fail
         metrics.inc("coach_analyses_total", state=state)
         metrics.inc("coach_stage_runs_total", stage=stage or "unknown", outcome=state)

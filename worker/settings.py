@@ -10,9 +10,16 @@ COACH_BROKER_URL           ``embedded`` (default): kombu's filesystem transport 
 COACH_RESULT_BACKEND       default: ``file://$COACH_DATA_DIR/celery/results`` when embedded,
                            the broker URL when it is Redis
 COACH_CHUNKS               stage-3 chunks per analysis when the settings do not say (4)
-COACH_VISIBILITY_TIMEOUT_S Redis visibility timeout, seconds (7200)
+COACH_VISIBILITY_TIMEOUT_S Redis visibility timeout, seconds (7200): when Redis hands an
+                           unacknowledged message out again by itself; the API's recovery
+                           (``app.core.recovery``) acts long before, on the heartbeat
 COACH_RESTORE_INTERVAL_S   how often a Redis worker looks for messages a dead worker left
                            unacknowledged past the visibility timeout, seconds (60)
+COACH_HEARTBEAT_S          how often a running task renews its analysis' heartbeat, s (5)
+COACH_LOST_AFTER_S         a heartbeat older than this means nobody runs the analysis, s (60);
+                           the API reads the same variable
+COACH_MAX_CRASHES          a stage whose runs killed their worker process this many times is
+                           failed instead of run again (2)
 COACH_<STAGE>_SOFT_S /     soft and hard time limits per task, seconds, STAGE one of
 COACH_<STAGE>_HARD_S       ANALYZE, PREPARE, CANDIDATES, SELECT (see ``DEFAULT_LIMITS_S``)
 COACH_MAX_RETRIES          retries of a transient error before the analysis is failed (5)
@@ -60,6 +67,16 @@ def _env_bool(env: dict, name: str, default: bool) -> bool:
     return raw.strip().lower() in ("1", "true", "yes", "on")
 
 
+def _env_float(env: dict, name: str, default: float) -> float:
+    raw = env.get(name)
+    if raw is None or raw == "":
+        return default
+    try:
+        return float(raw)
+    except ValueError:
+        raise ValueError(f"{name} must be a number of seconds, got {raw!r}") from None
+
+
 def _env_int(env: dict, name: str, default: int) -> int:
     raw = env.get(name)
     if raw is None or raw == "":
@@ -80,6 +97,9 @@ class WorkerSettings:
     chunks: int = 4
     visibility_timeout_s: int = 7200
     restore_interval_s: int = 60
+    heartbeat_s: float = 5.0
+    lost_after_s: float = 60.0
+    max_crashes: int = 2
     max_retries: int = 5
     sequential: bool = False
     limits_s: dict[str, tuple[int, int]] = field(default_factory=lambda: dict(DEFAULT_LIMITS_S))
@@ -143,6 +163,17 @@ class WorkerSettings:
         chunks = _env_int(env, "COACH_CHUNKS", 4)
         if chunks < 1:
             raise ValueError(f"COACH_CHUNKS must be >= 1, got {chunks}")
+        heartbeat = _env_float(env, "COACH_HEARTBEAT_S", 5.0)
+        lost_after = _env_float(env, "COACH_LOST_AFTER_S", 60.0)
+        # Several missed beats before "lost": a busy shared volume may delay one or two.
+        if not 0 < 3 * heartbeat <= lost_after:
+            raise ValueError(
+                f"COACH_LOST_AFTER_S ({lost_after}) must be at least three times "
+                f"COACH_HEARTBEAT_S ({heartbeat}), which must be > 0"
+            )
+        max_crashes = _env_int(env, "COACH_MAX_CRASHES", 2)
+        if max_crashes < 1:
+            raise ValueError(f"COACH_MAX_CRASHES must be >= 1, got {max_crashes}")
         return cls(
             data_dir=root,
             broker_url=broker,
@@ -150,6 +181,9 @@ class WorkerSettings:
             chunks=chunks,
             visibility_timeout_s=_env_int(env, "COACH_VISIBILITY_TIMEOUT_S", 7200),
             restore_interval_s=_env_int(env, "COACH_RESTORE_INTERVAL_S", 60),
+            heartbeat_s=heartbeat,
+            lost_after_s=lost_after,
+            max_crashes=max_crashes,
             max_retries=_env_int(env, "COACH_MAX_RETRIES", 5),
             sequential=_env_bool(env, "COACH_SEQUENTIAL", SEQUENTIAL_WHEN_EMBEDDED and embedded),
             limits_s=limits,

@@ -9,10 +9,14 @@ One canvas per analysis, following the engine's stages::
 Tasks take the job as JSON (ids and paths only) and re-read everything else from the analysis
 folder. Each task:
 
+- renews the analysis' heartbeat while it runs (:class:`worker.lease.Heartbeat`); the entry
+  task drops its message if another entry task's run of the analysis is alive, so the API's
+  recovery may queue an analysis again whenever it looks lost;
 - skips its stage if the output exists (done in :mod:`worker.jobs`), so a redelivered message
   (``acks_late``, ``reject_on_worker_lost``) resumes instead of redoing work;
-- records engine errors (``InvalidInput``, ``RegistrationFailed``) and cancellation on the
-  analysis and re-raises them without retrying, so the chord stops and select never runs;
+- records engine errors (``InvalidInput``, ``RegistrationFailed``), a stage that killed its
+  worker ``max_crashes`` times (``RepeatedCrash``) and cancellation on the analysis and
+  re-raises them without retrying, so the chord stops and select never runs;
 - retries only :data:`TRANSIENT` errors, with exponential backoff, up to ``max_retries``;
 - publishes progress as the custom state ``PROGRESS`` on itself and on the entry task's id
   (the id the API holds), next to status.json.
@@ -26,12 +30,13 @@ import random
 from types import ModuleType
 
 from celery import chain, chord, group
-from celery.exceptions import SoftTimeLimitExceeded
+from celery.exceptions import Retry, SoftTimeLimitExceeded
+from celery.signals import worker_process_init
 from kombu.exceptions import OperationalError
 
 from engine import pipeline as engine_pipeline
 from engine.errors import EngineError
-from worker import jobs, metrics
+from worker import jobs, lease, metrics
 from worker.celery_app import app, current_settings
 from worker.contract import (
     ANALYZE_TASK,
@@ -68,6 +73,13 @@ _S = current_settings()
 ENGINE: ModuleType = engine_pipeline
 
 
+@worker_process_init.connect
+def _on_pool_process_start(**_: object) -> None:
+    # Celery cancels running tasks with SIGTERM when it loses the broker: let them unwind so
+    # the cut-short stage is not counted as one that killed its worker.
+    lease.interrupt_on_sigterm()
+
+
 def _backoff(retries: int) -> float:
     """2, 4, 8, ... s with +-25 % jitter, capped at 10 min (inside the visibility timeout)."""
     return min(600.0, 2.0 * 2**retries) * random.uniform(0.75, 1.25)
@@ -86,11 +98,23 @@ def _publisher(task):
     return publish
 
 
+def _stage_kwargs(task) -> dict:
+    """What every stage function gets from its task: the engine, progress, the crash limit."""
+    return {"pipeline": ENGINE, "publish": _publisher(task), "max_crashes": _S.max_crashes}
+
+
 def _run(task, job: AnalysisJob, stage: str, work):
-    """Run ``work()`` with the error policy of the module docstring."""
+    """Run ``work()`` under the analysis' heartbeat, with the error policy of the module
+    docstring."""
+    owner = task.request.root_id or task.request.id or job.analysis_id
+    with lease.Heartbeat(job.work_dir, owner, _S.heartbeat_s) as heartbeat:
+        return _run_policy(task, job, stage, work, heartbeat)
+
+
+def _run_policy(task, job: AnalysisJob, stage: str, work, heartbeat: lease.Heartbeat):
     try:
         return work()
-    except (EngineError, jobs.Cancelled) as exc:
+    except (EngineError, jobs.Cancelled, lease.RepeatedCrash) as exc:
         jobs.record_failure(job, exc, stage=stage)
         _mark_root_failed(task, exc)
         raise
@@ -111,7 +135,12 @@ def _run(task, job: AnalysisJob, stage: str, work):
                 error=repr(exc),
                 countdown=countdown,
             )
-            raise task.retry(exc=exc, countdown=countdown) from exc
+            try:
+                raise task.retry(exc=exc, countdown=countdown) from exc
+            except Retry:
+                # The retry's message waits in a worker for the countdown: keep the lease.
+                heartbeat.hold(countdown)
+                raise
         jobs.record_failure(job, exc, stage=stage)
         _mark_root_failed(task, exc)
         raise
@@ -143,11 +172,17 @@ def analyze(self, job_json: dict) -> dict:
     job = AnalysisJob.from_json(job_json)
     n_chunks = _S.chunks
 
+    # Before this task's own heartbeat starts: a second entry message for a live run (queued
+    # again by recovery, or published twice) is dropped.
+    if lease.running_elsewhere(job.work_dir, self.request.id, _S.lost_after_s):
+        jobs.log_event("analysis.duplicate_dropped", analysis_id=job.analysis_id)
+        return {"analysis_id": job.analysis_id, "launched": False}
+
     def work() -> dict:
         if not jobs.start(job):
             return {"analysis_id": job.analysis_id, "launched": False}
         if _S.sequential:
-            path = jobs.run_all(job, n_chunks, pipeline=ENGINE, publish=_publisher(self))
+            path = jobs.run_all(job, n_chunks, **_stage_kwargs(self))
             self.update_state(state="SUCCESS", meta={"result_path": str(path)})
             return {"analysis_id": job.analysis_id, "result_path": str(path)}
         return launch(job, n_chunks, root_id=self.request.id)
@@ -201,7 +236,7 @@ def prepare(self, job_json: dict) -> str:
             self,
             job,
             "prepare",
-            lambda: jobs.run_prepare(job, pipeline=ENGINE, publish=_publisher(self)),
+            lambda: jobs.run_prepare(job, **_stage_kwargs(self)),
         )
     )
 
@@ -220,9 +255,7 @@ def candidates(self, job_json: dict, index: int, n_chunks: int) -> str:
             self,
             job,
             "candidates",
-            lambda: jobs.run_candidates(
-                job, index, n_chunks, pipeline=ENGINE, publish=_publisher(self)
-            ),
+            lambda: jobs.run_candidates(job, index, n_chunks, **_stage_kwargs(self)),
         )
     )
 
@@ -246,9 +279,7 @@ def select(self, job_json: dict, n_chunks: int) -> dict:
         self,
         job,
         "select",
-        lambda: jobs.run_select(
-            job, n_chunks, pipeline=ENGINE, publish=_publisher(self), on_result=on_result
-        ),
+        lambda: jobs.run_select(job, n_chunks, on_result=on_result, **_stage_kwargs(self)),
     )
     return _done(job, path)
 

@@ -59,13 +59,22 @@ class Settings(BaseSettings):
     # Progress reflection and server-sent events.
     sse_poll_s: float = Field(default=0.5, gt=0)
     sse_max_s: float = Field(default=3600.0, gt=0)
-    #: Seconds between background syncs of running analyses (fires webhooks); 0 disables.
+    #: Seconds between background syncs of running analyses (fires webhooks, and recovery:
+    #: app.core.recovery); 0 disables.
     reflect_interval_s: float = Field(default=2.0, ge=0)
+    #: Recovery: an analysis whose heartbeat is this old is run by nobody and is queued again
+    #: (the workers read the same COACH_LOST_AFTER_S); one whose message the broker does not
+    #: hold, or was never published, is queued again after publish_grace_s.
+    lost_after_s: float = Field(default=60.0, gt=0)
+    publish_grace_s: float = Field(default=30.0, gt=0)
 
     # Webhooks: bounded retries with exponential backoff.
     webhook_attempts: int = Field(default=5, ge=1, le=20)
     webhook_backoff_s: float = Field(default=2.0, ge=0)
     webhook_timeout_s: float = Field(default=10.0, gt=0)
+    #: Lets webhooks go to private, loopback and link-local addresses (tests, a receiver on
+    #: the same host). Off, a club cannot make the service call its internal network.
+    webhook_allow_private: bool = False
 
     session_max_age_s: int = 14 * 24 * 3600
     # Sign-in throttle: free failures per account and per client address, then a lock that

@@ -1,4 +1,4 @@
-"""The seam between the API and the workers: enqueue and revoke, nothing else.
+"""The seam between the API and the workers: enqueue, revoke, and what the broker holds.
 
 Routes get a :class:`JobQueue` through ``QueueDep``; tests override :func:`get_queue` with a
 recorder. The Celery client is imported lazily so the API starts (and answers reads) while
@@ -10,17 +10,24 @@ from __future__ import annotations
 from typing import Protocol
 
 from app.core.validation import engine_domain
-from worker.contract import AnalysisJob
+from worker.contract import AnalysisJob, BrokerTasks
 
 
 class QueueUnavailable(Exception):
     """The job could not be handed to the workers (no worker package, broker down)."""
 
 
+class PublishFailed(QueueUnavailable):
+    """The broker did not take the job this time (down, restarting); recovery publishes the
+    committed analysis once it is back (app.core.recovery)."""
+
+
 class JobQueue(Protocol):
     def enqueue(self, job: AnalysisJob) -> str: ...
 
     def revoke(self, task_id: str) -> None: ...
+
+    def broker_tasks(self) -> BrokerTasks | None: ...
 
 
 class CeleryQueue:
@@ -34,7 +41,7 @@ class CeleryQueue:
         try:
             return str(enqueue(job))
         except Exception as exc:  # kombu/redis raise many types; all mean "not queued"
-            raise QueueUnavailable(f"could not queue the analysis: {exc}") from exc
+            raise PublishFailed(f"could not queue the analysis: {exc}") from exc
 
     def revoke(self, task_id: str) -> None:
         try:
@@ -45,6 +52,14 @@ class CeleryQueue:
             revoke(task_id)
         except Exception as exc:
             raise QueueUnavailable(f"could not revoke task {task_id}: {exc}") from exc
+
+    def broker_tasks(self) -> BrokerTasks | None:
+        """The task ids the broker holds (waiting, held by a worker); None if unknown."""
+        try:
+            from worker.celery_app import broker_tasks
+        except ImportError:
+            return None
+        return broker_tasks()
 
 
 def analysis_job(analysis, reference, engine_preset: str = "") -> AnalysisJob:

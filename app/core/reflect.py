@@ -13,6 +13,7 @@ import json
 import logging
 import threading
 import time
+import uuid
 from collections.abc import Callable
 from typing import Any
 
@@ -21,6 +22,7 @@ from sqlalchemy import update
 from sqlalchemy.orm import Session, sessionmaker
 
 from app import crud
+from app.core import webhooks
 from app.core.config import Settings
 from app.core.security import sign_webhook
 from app.core.storage import Storage
@@ -85,7 +87,12 @@ def reflect(session: Session, analysis: Analysis, *, on_final: OnFinal | None = 
 
 
 class Notifier:
-    """Sends completion webhooks from background threads, retrying with backoff (bounded)."""
+    """Sends completion webhooks from background threads, retrying with backoff (bounded).
+
+    Each delivery is checked and pinned to a public address (:mod:`app.core.webhooks`) before
+    every attempt, signed with a fresh timestamp, and carries one delivery id for all its
+    attempts (``X-Coach-Delivery`` and ``delivery_id`` in the body).
+    """
 
     def __init__(self, settings: Settings, session_factory: sessionmaker) -> None:
         self.settings = settings
@@ -101,42 +108,63 @@ class Notifier:
             if club is None or not club.webhook_url or not club.webhook_secret:
                 return
             url, secret = club.webhook_url, club.webhook_secret
+        delivery_id = str(uuid.uuid4())
         body = json.dumps(
             {
+                "delivery_id": delivery_id,
                 "event": f"analysis.{analysis.status}",
                 "analysis": AnalysisPublic.model_validate(analysis).model_dump(mode="json"),
             },
             separators=(",", ":"),
         ).encode()
         thread = threading.Thread(
-            target=self._deliver, args=(url, secret, body, analysis.id), daemon=True
+            target=self.deliver, args=(url, secret, body, analysis.id, delivery_id), daemon=True
         )
         with self._lock:
             self._threads = [t for t in self._threads if t.is_alive()] + [thread]
         thread.start()
 
-    def _deliver(self, url: str, secret: str, body: bytes, analysis_id: str) -> None:
-        headers = {
-            "Content-Type": "application/json",
-            "User-Agent": "motion-coach-webhook/1",
-            "X-Coach-Signature": sign_webhook(body, secret),
-        }
+    def deliver(
+        self, url: str, secret: str, body: bytes, analysis_id: str, delivery_id: str
+    ) -> bool:
+        """POST ``body`` to ``url`` until a 2xx answer or the attempts run out; True when it
+        was delivered. An internal address, a redirect or a 4xx answer (but 408 and 429)
+        ends the delivery at once."""
         s = self.settings
         for attempt in range(s.webhook_attempts):
             try:
-                r = httpx.post(url, content=body, headers=headers, timeout=s.webhook_timeout_s)
+                dest = webhooks.destination(url, allow_private=s.webhook_allow_private)
+                timestamp = int(time.time())
+                headers = {
+                    "Content-Type": "application/json",
+                    "User-Agent": "motion-coach-webhook/1",
+                    "X-Coach-Delivery": delivery_id,
+                    "X-Coach-Timestamp": str(timestamp),
+                    "X-Coach-Signature": sign_webhook(body, secret, timestamp),
+                }
+                r = webhooks.post(dest, body, headers, timeout_s=s.webhook_timeout_s)
                 if r.status_code < 300:
                     log.info("webhook.delivered analysis=%s attempt=%d", analysis_id, attempt + 1)
-                    return
-                if 400 <= r.status_code < 500 and r.status_code not in (408, 429):
+                    return True
+                if r.status_code < 400:  # a redirect could lead anywhere: not followed
+                    log.warning(
+                        "webhook.refused analysis=%s status=%d redirect not followed",
+                        analysis_id, r.status_code,
+                    )  # fmt: skip
+                    return False
+                if r.status_code < 500 and r.status_code not in (408, 429):
                     log.warning("webhook.refused analysis=%s status=%d", analysis_id, r.status_code)
-                    return
+                    return False
                 log.warning("webhook.retry analysis=%s status=%d", analysis_id, r.status_code)
-            except httpx.HTTPError as exc:
+            except webhooks.UnsafeWebhookUrl as exc:
+                log.warning("webhook.refused analysis=%s reason=%s", analysis_id, exc)
+                return False
+            except (webhooks.UnresolvedHost, httpx.HTTPError) as exc:
                 log.warning("webhook.retry analysis=%s error=%s", analysis_id, exc)
             if attempt + 1 < s.webhook_attempts:
                 time.sleep(s.webhook_backoff_s * 2**attempt)
         log.error("webhook.gave_up analysis=%s attempts=%d", analysis_id, s.webhook_attempts)
+        return False
 
     def wait(self, timeout: float = 10.0) -> None:
         """Join the delivery threads (tests, shutdown)."""
@@ -148,12 +176,20 @@ class Notifier:
 
 
 class Reflector:
-    """Background thread: reflects every active analysis every ``interval`` seconds."""
+    """Background thread: reflects every active analysis every ``interval`` seconds, then
+    calls ``recover(session)`` (``app.core.recovery.recover``: lost analyses queued again)."""
 
-    def __init__(self, session_factory: sessionmaker, on_final: OnFinal, interval: float) -> None:
+    def __init__(
+        self,
+        session_factory: sessionmaker,
+        on_final: OnFinal,
+        interval: float,
+        recover: Callable[[Session], object] | None = None,
+    ) -> None:
         self.session_factory = session_factory
         self.on_final = on_final
         self.interval = interval
+        self.recover = recover
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="coach-reflector", daemon=True)
 
@@ -170,5 +206,7 @@ class Reflector:
                 with self.session_factory() as session:
                     for analysis in crud.list_active_analyses(session):
                         reflect(session, analysis, on_final=self.on_final)
+                    if self.recover is not None:
+                        self.recover(session)
             except Exception:  # keep reflecting: one bad row or a locked db is not fatal
                 log.exception("reflector.error")

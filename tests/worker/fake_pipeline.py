@@ -3,13 +3,19 @@
 Used by the unit tests (passed as ``pipeline=``) and by integration tests that need a stage of
 known length (their workers run ``celery -A tests.worker.fake_app``). Settings it reads:
 ``fake_frames`` (video frames, 12), ``fake_seconds_per_frame`` (0), ``fake_fail`` ("invalid"
-raises InvalidInput in prepare, "registration" RegistrationFailed in select).
+raises InvalidInput in prepare, "registration" RegistrationFailed in select), ``fake_die``
+("process": stage 3 SIGKILLs the pool process running it, as the OOM killer would; "worker":
+the whole worker, pool and main process, as a lost machine would). Each falls back to the
+environment variable ``FAKE_<NAME>`` (``FAKE_FRAMES``, ...), so a job queued by the API's own
+code (which sends no fake settings) can be steered from the worker's environment.
 The result is a deterministic function of the inputs' bytes, so runs can be compared.
 """
 
 from __future__ import annotations
 
 import hashlib
+import os
+import signal
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,7 +40,18 @@ def parse_domain(doc):
 
 
 def _settings(settings):
-    return settings or {}
+    env = {
+        f"fake_{name}": os.environ[f"FAKE_{name.upper()}"]
+        for name in ("frames", "seconds_per_frame", "fail", "die")
+        if os.environ.get(f"FAKE_{name.upper()}")
+    }
+    return env | dict(settings or {})
+
+
+def _die(how):
+    if how == "worker":
+        os.killpg(os.getpgrp(), signal.SIGKILL)  # the worker was started in its own group
+    os.kill(os.getpid(), signal.SIGKILL)
 
 
 def _sleep_progress(stage, n, seconds_per_frame, on_progress):
@@ -96,6 +113,8 @@ def prepare(reference_path, video_path, settings=None, *, domain=None, mapping=N
 
 def candidates(prepared, frames, settings=None, *, on_progress=None):
     CALLS.append(("candidates", (frames.start, frames.stop)))
+    if how := _settings(settings).get("fake_die"):
+        _die(how)
     idx = np.arange(frames.start, frames.stop)
     _sleep_progress("candidates", max(len(idx), 1), prepared.settings_seconds, on_progress)
     return CandidateChunk(frames=idx, values=prepared.seed[idx] * 2 + 1)

@@ -42,6 +42,17 @@ def test_limits_from_env_and_validation(tmp_path):
         WorkerSettings.from_env({"COACH_VISIBILITY_TIMEOUT_S": "soon"})
 
 
+def test_heartbeat_settings_from_env_and_validation(tmp_path):
+    s = WorkerSettings.from_env({"COACH_DATA_DIR": str(tmp_path)})
+    assert (s.heartbeat_s, s.lost_after_s, s.max_crashes) == (5.0, 60.0, 2)
+    s = WorkerSettings.from_env({"COACH_HEARTBEAT_S": "0.5", "COACH_LOST_AFTER_S": "3"})
+    assert (s.heartbeat_s, s.lost_after_s) == (0.5, 3.0)
+    with pytest.raises(ValueError, match="COACH_LOST_AFTER_S"):  # a missed beat is no loss
+        WorkerSettings.from_env({"COACH_HEARTBEAT_S": "30", "COACH_LOST_AFTER_S": "60"})
+    with pytest.raises(ValueError, match="COACH_MAX_CRASHES"):
+        WorkerSettings.from_env({"COACH_MAX_CRASHES": "0"})
+
+
 def test_celery_conf_for_long_idempotent_tasks():
     from worker.celery_app import app
 

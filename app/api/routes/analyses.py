@@ -1,13 +1,13 @@
 import asyncio
+import hashlib
 import json
 import logging
 import tempfile
 import time
 import uuid
 from collections.abc import AsyncIterator
-from datetime import datetime
 from pathlib import Path
-from typing import Annotated, Any
+from typing import IO, Annotated, Any
 
 from fastapi import APIRouter, File, Form, Header, Query, Request, Response, UploadFile
 from fastapi.concurrency import run_in_threadpool
@@ -18,6 +18,7 @@ from starlette.background import BackgroundTask
 from app import crud
 from app.api.access import analysis_for, done_analysis, reference_for, result_of
 from app.api.deps import (
+    CREATED,
     CurrentCoach,
     CurrentPrincipal,
     NotifierDep,
@@ -27,11 +28,13 @@ from app.api.deps import (
     SessionDep,
     SettingsDep,
     StorageDep,
+    location,
 )
 from app.api.errors import ApiError, errors, not_found
+from app.api.params import MAX_ID, DbIdForm, DbIdQuery, Instant
 from app.core import media, summary, validation
 from app.core.config import Settings
-from app.core.queue import JobQueue, QueueUnavailable, analysis_job
+from app.core.queue import JobQueue, PublishFailed, QueueUnavailable, analysis_job
 from app.core.reflect import reflect
 from app.core.storage import Storage, UploadTooLarge
 from app.models import TERMINAL_STATES, Analysis
@@ -55,7 +58,11 @@ IdempotencyKey = Annotated[
         alias="Idempotency-Key",
         min_length=1,
         max_length=255,
-        description="Retrying an upload with the same key returns the same analysis (200).",
+        description=(
+            "Retrying an upload with the same key returns the same analysis (200); the key "
+            "used again for a different upload (another video, reference or performer) is a "
+            "409."
+        ),
     ),
 ]
 
@@ -71,13 +78,17 @@ def _public(analysis: Analysis) -> AnalysisPublic:
     summary="Upload a performer's video and start its analysis",
     description=(
         "The video is streamed to disk, size-limited and decoded (first frames) before it is "
-        "accepted. 201 for a new analysis; 200 with the existing one when the Idempotency-Key "
-        "was already used by this club."
+        "accepted. 201 for a new analysis, with its `Location`; 200 with the existing one when "
+        "the Idempotency-Key was already used by this club for the same upload (the same "
+        "video, reference and performer); 409 `idempotency_conflict` when it was used for a "
+        "different one."
     ),
     responses={200: {"model": AnalysisPublic, "description": "Idempotent replay"}}
-    | errors(404, 413, 422, 503),
+    | CREATED
+    | errors(404, 409, 413, 422, 503),
 )
 async def create_analysis(
+    request: Request,
     response: Response,
     who: CurrentPrincipal,
     session: SessionDep,
@@ -85,21 +96,25 @@ async def create_analysis(
     storage: StorageDep,
     queue: QueueDep,
     video: Annotated[UploadFile, File(description="The performer's video.")],
-    reference_id: Annotated[int, Form(ge=1)],
+    reference_id: DbIdForm,
     performer_id: Annotated[
-        int | None, Form(ge=1, description="Whom the video shows (a performer: themselves).")
+        int | None,
+        Form(ge=1, le=MAX_ID, description="Whom the video shows (a performer: themselves)."),
     ] = None,
     idempotency_key: IdempotencyKey = None,
 ):
     club = who.club
     performer_id = _performer_shown(who, performer_id)
+    fingerprint = None
     if idempotency_key is not None:
+        video_sha256 = await run_in_threadpool(_sha256_of, video.file)
+        fingerprint = _fingerprint(reference_id, performer_id, video_sha256)
         existing = crud.get_analysis_by_idempotency_key(
             session, club_id=club.id, key=idempotency_key
         )
         if existing is not None:
             response.status_code = 200
-            return existing
+            return _replay(existing, idempotency_key, fingerprint)
     reference = reference_for(session, who, reference_id)
     if crud.get_performer(session, club_id=club.id, user_id=performer_id) is None:
         raise not_found("performer", performer_id)
@@ -122,6 +137,7 @@ async def create_analysis(
             status="queued",
             message=f"queued ({info['frames']} frames at {info['fps']:.1f} fps)",
             idempotency_key=idempotency_key,
+            idempotency_fingerprint=fingerprint,
         )
         session.add(analysis)
         try:
@@ -136,9 +152,10 @@ async def create_analysis(
             if existing is None:
                 raise
             response.status_code = 200
-            return existing
+            return _replay(existing, idempotency_key or "", fingerprint)
         job = analysis_job(analysis, reference, settings.engine_preset)
         await _enqueue(session, queue, analysis, job)
+        response.headers["Location"] = location(request, "read_analysis", analysis_id=analysis.id)
         return analysis
     except BaseException:
         session.rollback()
@@ -147,6 +164,37 @@ async def create_analysis(
         raise
     finally:
         Storage.remove(tmp)
+
+
+def _sha256_of(f: IO[bytes]) -> str:
+    """The hex sha256 of the spooled upload, which is then rewound for its copy."""
+    digest = hashlib.sha256()
+    f.seek(0)
+    while chunk := f.read(1024 * 1024):
+        digest.update(chunk)
+    f.seek(0)
+    return digest.hexdigest()
+
+
+def _fingerprint(reference_id: int, performer_id: int, video_sha256: str) -> str:
+    """What makes two uploads under one Idempotency-Key the same request."""
+    fields = json.dumps([reference_id, performer_id, video_sha256])
+    return hashlib.sha256(fields.encode()).hexdigest()
+
+
+def _replay(existing: Analysis, key: str, fingerprint: str | None) -> Analysis:
+    """The analysis made by an earlier upload with this key; 409 when that upload differed.
+
+    Rows made before fingerprints were kept have none and are taken as the same.
+    """
+    if existing.idempotency_fingerprint not in (None, fingerprint):
+        raise ApiError(
+            409, "idempotency_conflict",
+            "this Idempotency-Key was already used for a different upload (another video, "
+            "reference or performer); use a new key for a new upload",
+            {"analysis_id": existing.id},
+        )  # fmt: skip
+    return existing
 
 
 async def _receive_video(
@@ -168,9 +216,14 @@ async def _receive_video(
 
 
 async def _enqueue(session, queue: JobQueue, analysis: Analysis, job: AnalysisJob) -> None:
-    """Queue the analysis' job; a queue that cannot take it removes the row (503)."""
+    """Queue the analysis' job. The committed row is the record: a broker that does not take
+    the job now gets it from recovery later (app.core.recovery); only a deployment without
+    the worker package removes the row (503)."""
     try:
         analysis.task_id = await run_in_threadpool(queue.enqueue, job)
+    except PublishFailed as exc:
+        log.warning("analysis.publish_deferred analysis=%s error=%s", analysis.id, exc)
+        return
     except QueueUnavailable as exc:
         session.delete(analysis)
         session.commit()
@@ -198,11 +251,17 @@ def list_analyses(
     session: SessionDep,
     page: PageDep,
     notifier: NotifierDep,
-    performer_id: Annotated[int | None, Query(ge=1)] = None,
-    reference_id: Annotated[int | None, Query(ge=1)] = None,
+    performer_id: DbIdQuery = None,
+    reference_id: DbIdQuery = None,
     status: Annotated[AnalysisState | None, Query()] = None,
-    created_after: Annotated[datetime | None, Query()] = None,
-    created_before: Annotated[datetime | None, Query()] = None,
+    created_after: Annotated[
+        Instant | None,
+        Query(description="Created at or after this ISO 8601 date-time (no zone: UTC)."),
+    ] = None,
+    created_before: Annotated[
+        Instant | None,
+        Query(description="Created before this ISO 8601 date-time (no zone: UTC)."),
+    ] = None,
 ):
     own = who.own_performer_id
     if own is not None and performer_id not in (None, own):
@@ -287,7 +346,11 @@ async def read_video(analysis_id: str, who: CurrentPrincipal, session: SessionDe
     try:
         path = await run_in_threadpool(media.playable_video, a.video_path, a.work_dir)
     except Exception as exc:  # a broken upload: say so instead of a 500 page
-        raise ApiError(422, "invalid_video", f"the video cannot be converted ({exc})") from None
+        # The library's message names server paths and error numbers: logged, not sent.
+        log.warning("analysis.video_unplayable analysis=%s error=%s", a.id, exc)
+        raise ApiError(
+            422, "invalid_video", "the video cannot be converted to play in a browser"
+        ) from None
     return FileResponse(path, media_type="video/mp4")
 
 

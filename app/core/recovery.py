@@ -1,0 +1,177 @@
+"""Recovery that needs no one: analyses nobody is working on are queued again (issue 26).
+
+The reflector calls :func:`recover` on every tick. An analysis the database calls queued or
+running can be left with nobody working on it in three ways:
+
+=============================  ===================================  ============================
+what happened                  what is left                         queued again after
+=============================  ===================================  ============================
+the API died between the       the committed row without a task id  ``publish_grace_s`` (30 s)
+database commit and the        (the row is the outbox record,
+publish, or the broker was     recovery its relay)
+down then
+Redis restarted                no message at all; running tasks     ``publish_grace_s`` if it
+                               were cancelled                       was waiting, else
+                                                                    ``lost_after_s`` (60 s)
+a whole worker died (SIGKILL,  its message, held unacknowledged     ``lost_after_s``
+lost machine)                  until the visibility timeout (2 h)
+=============================  ===================================  ============================
+
+A pool process killed by the OOM killer needs none of this: Celery hands its message out again
+at once, and ``worker.lease`` fails a stage that keeps killing its worker.
+
+The signs, read from the analysis folder and the broker (``JobQueue.broker_tasks``): while a
+task of the analysis runs, its heartbeat is renewed every few seconds. An analysis is lost when
+no message of it waits in the queue (that one only waits for a free worker), its heartbeat is
+``lost_after_s`` old or absent (the rule the workers apply too: a younger one means a live
+run, which would drop the new message as a duplicate), and its last sign of life (heartbeat,
+status.json, the row's own times) is older than ``publish_grace_s`` if the broker holds no
+message of it, or than ``lost_after_s`` if a worker holds one (that worker is dead).
+
+Queueing again is always safe: stages whose output exists are skipped, and a worker drops an
+entry message for an analysis whose heartbeat another run keeps fresh. The row's
+``recoveries`` counter is the claim: a conditional update (``WHERE recoveries = n``) lets one
+API process of several do it.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from datetime import datetime
+
+from sqlalchemy import update
+from sqlalchemy.orm import Session
+
+from app import crud
+from app.core.config import Settings
+from app.core.queue import JobQueue, QueueUnavailable, analysis_job
+from app.core.storage import Storage
+from app.models import TERMINAL_STATES, Analysis, Reference, utcnow
+from worker.contract import AnalysisFolder, BrokerTasks
+
+log = logging.getLogger("app.recovery")
+
+
+def _mtime(path: os.PathLike) -> float:
+    try:
+        return os.stat(path).st_mtime
+    except OSError:
+        return 0.0
+
+
+def _timestamp(value: datetime | None) -> float:
+    return value.timestamp() if value is not None else 0.0
+
+
+def quiet_s(analysis: Analysis, now: float) -> float | None:
+    """Seconds since the analysis last showed life; None if it is finished in its folder
+    (done, failed, cancelled: the reflector records that, nothing to recover)."""
+    folder = AnalysisFolder(analysis.work_dir)
+    if folder.result.exists() or folder.cancel.exists():
+        return None
+    if (Storage.read_json(folder.status) or {}).get("state") in TERMINAL_STATES:
+        return None
+    last = max(
+        _mtime(folder.heartbeat),
+        _mtime(folder.status),
+        _timestamp(analysis.created_at),
+        _timestamp(analysis.updated_at),
+    )
+    return now - last
+
+
+def task_ids(analysis: Analysis) -> set[str]:
+    """The analysis' entry task and the stage tasks its canvas launched."""
+    ids = {analysis.task_id} if analysis.task_id else set()
+    note = Storage.read_json(AnalysisFolder(analysis.work_dir).tasks) or {}
+    ids.update(str(i) for i in note.get("stage_task_ids") or [])
+    return ids
+
+
+def lost_cause(
+    analysis: Analysis, broker: BrokerTasks, settings: Settings, now: float
+) -> str | None:
+    """Why nobody works on the analysis, or None while somebody may."""
+    quiet = quiet_s(analysis, now)
+    if quiet is None or quiet < settings.publish_grace_s:
+        return None
+    heartbeat = AnalysisFolder(analysis.work_dir).heartbeat_age_s(now)
+    if heartbeat is not None and heartbeat < settings.lost_after_s:
+        return None  # a live run, or one that ended moments ago and left its next message
+    ids = task_ids(analysis)
+    if ids & broker.waiting:
+        return None  # waits for a free worker
+    held = broker.held is None or bool(ids & broker.held)
+    if held and quiet < settings.lost_after_s:
+        # A worker took it (or the transport cannot say): only a stale heartbeat proves that
+        # worker dead; its task would renew the heartbeat every few seconds.
+        return None
+    if not analysis.task_id:
+        return "never published"
+    if broker.held is None:
+        return "lost"
+    return "worker lost" if held else "message lost"
+
+
+def recover(
+    session: Session, *, settings: Settings, queue: JobQueue, now: float | None = None
+) -> list[str]:
+    """Queue every lost analysis again; returns their ids."""
+    now = time.time() if now is None else now
+    suspects = [
+        a for a in crud.list_active_analyses(session)
+        if (q := quiet_s(a, now)) is not None and q >= settings.publish_grace_s
+    ]  # fmt: skip
+    if not suspects:
+        return []
+    broker = queue.broker_tasks()
+    if broker is None:
+        return []  # broker unreachable: nothing can be queued now anyway
+    # Signs read after the broker: a task that started meanwhile shows in its heartbeat.
+    now = max(now, time.time())
+    recovered = []
+    for analysis in suspects:
+        cause = lost_cause(analysis, broker, settings, now)
+        if cause is not None and _requeue(session, settings, queue, analysis, cause):
+            recovered.append(analysis.id)
+    return recovered
+
+
+def _requeue(
+    session: Session, settings: Settings, queue: JobQueue, analysis: Analysis, cause: str
+) -> bool:
+    reference = session.get(Reference, analysis.reference_id)
+    if reference is None:
+        return False
+    claim = (
+        update(Analysis)
+        .where(
+            Analysis.id == analysis.id,
+            Analysis.recoveries == analysis.recoveries,
+            Analysis.status.not_in(TERMINAL_STATES),
+        )
+        .values(recoveries=analysis.recoveries + 1, updated_at=utcnow())
+        # Not applied to the loaded row in Python: it may be the stale one that lost the race.
+        .execution_options(synchronize_session=False)
+    )
+    # updated_at counts as a sign of life: another API process reading the row after this
+    # commit waits publish_grace_s before it even considers the analysis again.
+    claimed = session.execute(claim).rowcount == 1
+    session.commit()
+    session.refresh(analysis)
+    if not claimed:
+        return False
+    try:
+        task_id = queue.enqueue(analysis_job(analysis, reference, settings.engine_preset))
+    except QueueUnavailable as exc:
+        log.warning("analysis.recovery_failed analysis=%s error=%s", analysis.id, exc)
+        return False
+    analysis.task_id = task_id
+    session.commit()
+    log.warning(
+        "analysis.recovered analysis=%s cause=%r recoveries=%d task=%s",
+        analysis.id, cause, analysis.recoveries, task_id,
+    )  # fmt: skip
+    return True

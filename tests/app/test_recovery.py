@@ -1,0 +1,153 @@
+"""app.core.recovery without workers: what counts as lost, the outbox relay, the claim.
+
+The end-to-end cases (Redis restarted, worker SIGKILLed, a job that kills its worker) run
+against real processes in tests/integration/test_recovery.py.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import dataclass, field
+from datetime import UTC, datetime, timedelta
+
+import pytest
+
+from app import crud
+from app.core import recovery
+from app.core.queue import PublishFailed, QueueUnavailable, get_queue
+from app.models import Analysis
+from tests.app.conftest import RecordingQueue, upload
+from worker.contract import AnalysisFolder, BrokerTasks
+
+
+@dataclass
+class BrokerQueue(RecordingQueue):
+    """A recording queue whose broker holds ``waiting`` and ``held`` task ids; what it
+    queues waits there."""
+
+    waiting: set = field(default_factory=set)
+    held: set | None = field(default_factory=set)
+
+    def enqueue(self, job) -> str:
+        self.jobs.append(job)
+        task_id = f"recovered-{len(self.jobs)}"
+        self.waiting.add(task_id)
+        return task_id
+
+    def broker_tasks(self) -> BrokerTasks:
+        held = None if self.held is None else frozenset(self.held)
+        return BrokerTasks(frozenset(self.waiting), held)
+
+
+def _analysis(tmp_path, *, task_id: str | None = "t1", age_s: float = 100.0) -> Analysis:
+    then = datetime.now(UTC) - timedelta(seconds=age_s)
+    work = tmp_path / "a"
+    work.mkdir(exist_ok=True)
+    return Analysis(
+        id="a", work_dir=str(work), status="running", task_id=task_id, recoveries=0,
+        created_at=then, updated_at=then,
+    )  # fmt: skip
+
+
+def _age(path, seconds: float) -> None:
+    path.touch()
+    os.utime(path, (time.time() - seconds,) * 2)
+
+
+@pytest.mark.parametrize(
+    ("heartbeat_age", "waiting", "held", "task_id", "expected"),
+    [
+        (None, set(), set(), None, "never published"),
+        (100, set(), set(), "t1", "message lost"),  # Redis restarted
+        (100, set(), {"t1"}, "t1", "worker lost"),  # its worker was SIGKILLed
+        (100, set(), None, "t1", "lost"),  # embedded: the broker cannot tell, the heartbeat can
+        (100, {"t1-candidates-1"}, set(), "t1", None),  # its next stage waits for a worker
+        (10, set(), set(), "t1", None),  # a live run (heartbeat younger than lost_after_s)
+        (-30, set(), {"t1"}, "t1", None),  # a retry's countdown holds the lease
+    ],
+)
+def test_what_counts_as_lost(tmp_path, settings, heartbeat_age, waiting, held, task_id, expected):
+    analysis = _analysis(tmp_path, task_id=task_id)
+    folder = AnalysisFolder(analysis.work_dir)
+    folder.tasks.write_text(json.dumps({"stage_task_ids": ["t1-prepare", "t1-candidates-1"]}))
+    _age(folder.tasks, 100)
+    if heartbeat_age is not None:
+        _age(folder.heartbeat, heartbeat_age)
+    broker = BrokerTasks(frozenset(waiting), None if held is None else frozenset(held))
+    assert recovery.lost_cause(analysis, broker, settings, time.time()) == expected
+
+
+def test_held_message_waits_out_lost_after_not_the_grace(tmp_path, settings):
+    analysis = _analysis(tmp_path, age_s=settings.publish_grace_s + 1)
+    held = BrokerTasks(frozenset(), frozenset({"t1"}))
+    assert recovery.lost_cause(analysis, held, settings, time.time()) is None
+    embedded = BrokerTasks(frozenset(), None)  # its worker may hold it: no telling
+    assert recovery.lost_cause(analysis, embedded, settings, time.time()) is None
+    gone = BrokerTasks(frozenset(), frozenset())
+    assert recovery.lost_cause(analysis, gone, settings, time.time()) == "message lost"
+
+
+@pytest.mark.parametrize("finished", ["result", "cancel", "status"])
+def test_finished_folders_are_left_to_the_reflector(tmp_path, settings, finished):
+    analysis = _analysis(tmp_path)
+    folder = AnalysisFolder(analysis.work_dir)
+    if finished == "status":
+        folder.status.write_text(json.dumps({"state": "failed"}))
+    else:
+        getattr(folder, finished).write_text("{}")
+    gone = BrokerTasks(frozenset(), frozenset())
+    assert recovery.lost_cause(analysis, gone, settings, time.time() + 1000) is None
+
+
+class FailingQueue(RecordingQueue):
+    def __init__(self, exc: Exception):
+        super().__init__()
+        self.exc = exc
+
+    def enqueue(self, job) -> str:
+        raise self.exc
+
+
+def test_publish_failure_keeps_the_row_and_recovery_publishes_it(
+    app, client, club_ref, video_file, settings
+):
+    app.dependency_overrides[get_queue] = lambda: FailingQueue(PublishFailed("redis down"))
+    r = upload(client, club_ref, video_file)
+    assert r.status_code == 201, r.text
+    analysis_id = r.json()["id"]
+    queue = BrokerQueue()
+    later = time.time() + settings.publish_grace_s + 1
+    with app.state.sessionmaker() as session:
+        assert session.get(Analysis, analysis_id).task_id is None
+        assert recovery.recover(session, settings=settings, queue=queue, now=time.time()) == []
+        assert recovery.recover(session, settings=settings, queue=queue, now=later) == [analysis_id]
+        row = session.get(Analysis, analysis_id)
+        assert row.task_id == "recovered-1" and row.recoveries == 1
+    assert [j.analysis_id for j in queue.jobs] == [analysis_id]
+
+
+def test_no_worker_package_is_still_a_503(app, client, club_ref, video_file, settings):
+    app.dependency_overrides[get_queue] = lambda: FailingQueue(QueueUnavailable("no worker"))
+    r = upload(client, club_ref, video_file)
+    assert r.status_code == 503
+    with app.state.sessionmaker() as session:
+        assert session.query(Analysis).count() == 0
+
+
+def test_two_api_processes_recover_an_analysis_once(app, client, club_ref, video_file, settings):
+    upload(client, club_ref, video_file)  # queued as task-1, which the broker then forgot
+    queue = BrokerQueue()
+    later = time.time() + settings.lost_after_s + 1
+    first, second = app.state.sessionmaker(), app.state.sessionmaker()
+    with first, second:
+        # Both find it lost before either acts; the claim lets one through.
+        rows = [crud.list_active_analyses(s)[0] for s in (first, second)]
+        gone = BrokerTasks(frozenset(), frozenset())
+        assert [recovery.lost_cause(a, gone, settings, later) for a in rows] == ["message lost"] * 2
+        assert recovery._requeue(first, settings, queue, rows[0], "message lost")
+        assert not recovery._requeue(second, settings, queue, rows[1], "message lost")
+        # The next tick of either sees the new message waiting.
+        assert recovery.recover(second, settings=settings, queue=queue, now=later) == []
+    assert len(queue.jobs) == 1 and rows[0].recoveries == 1

@@ -1,0 +1,159 @@
+"""Who runs an analysis, and whether its stages kill their worker: files in its folder.
+
+Two questions the broker cannot answer reliably (a Redis restart forgets every message; a
+SIGKILLed worker's message waits out the visibility timeout, 2 h by default), answered through
+:class:`worker.contract.AnalysisFolder`:
+
+- *Is anybody running the analysis?* While any of its tasks runs, :class:`Heartbeat` renews the
+  ``heartbeat`` file every ``heartbeat_s``. One older than ``lost_after_s`` means nobody does:
+  the API's recovery (``app.core.recovery``) then queues the analysis again, and it resumes
+  from its last finished stage. So re-queueing is always safe, the entry task drops a message
+  for an analysis another entry task is running (:func:`running_elsewhere`).
+- *Does a stage kill its worker?* :func:`attempt` counts the runs of a stage that started and
+  never came back (the process was OOM-killed or crashed: no Python code ran to say so). At
+  ``max_crashes`` the stage fails with :class:`RepeatedCrash` instead of running again, so a
+  poison job stops instead of taking down worker after worker. A run that ends any way Python
+  sees does not count: a result, an error, a retry, or SIGTERM, which is how Celery cancels a
+  task when it loses the broker (:func:`interrupt_on_sigterm`).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import threading
+import time
+import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from types import FrameType
+
+from worker.contract import AnalysisFolder
+
+
+class RepeatedCrash(Exception):
+    """A stage's runs killed their worker process ``max_crashes`` times: failed for good."""
+
+    @classmethod
+    def after(cls, crashes: int) -> RepeatedCrash:
+        # The message is the only argument, so Celery can store and rebuild the exception.
+        times = {1: "once", 2: "twice"}.get(crashes, f"{crashes} times")
+        return cls(
+            f"the analysis stopped its worker {times} (out of memory or a crash); it will not "
+            "be retried — try a shorter or smaller video"
+        )
+
+
+class Interrupted(BaseException):
+    """SIGTERM reached a pool process mid-task (Celery cancelled the task).
+
+    A BaseException, so that no handler of the task's own errors records it as the analysis'
+    failure: the task is cut short, not wrong, and recovery runs it again.
+    """
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    # Readers must never see half a file; these are a few bytes, so no fsync.
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f"{path.name}.{uuid.uuid4().hex[:8]}.tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def _touch(path: Path, when: float | None = None) -> None:
+    try:
+        os.utime(path, None if when is None else (when, when))
+    except OSError:
+        pass  # the folder was removed (analysis deleted): nothing left to keep alive
+
+
+class Heartbeat:
+    """Context manager: renews the analysis' heartbeat every ``every_s`` while its body runs.
+
+    ``owner`` is the entry task's id (the Celery root id): a redelivery of the same run
+    carries the same one, a re-queue by recovery a new one.
+    """
+
+    def __init__(self, work_dir: str | os.PathLike, owner: str, every_s: float) -> None:
+        self.path = AnalysisFolder(work_dir).heartbeat
+        self.owner, self.every_s = owner, every_s
+        self.hold_s = 0.0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._beat, name="coach-heartbeat", daemon=True)
+
+    def hold(self, seconds: float) -> None:
+        """Keep the lease ``seconds`` past the exit: a retry's countdown, during which the
+        message waits in a worker and nothing runs, must not look like a lost analysis."""
+        self.hold_s = seconds
+
+    def __enter__(self) -> Heartbeat:
+        owner = {"owner": self.owner, "host": socket.gethostname(), "pid": os.getpid()}
+        try:
+            _write_atomic(self.path, json.dumps(owner))
+        except OSError:
+            pass  # the task reports the missing folder itself
+        self._thread.start()
+        return self
+
+    def _beat(self) -> None:
+        while not self._stop.wait(self.every_s):
+            _touch(self.path)
+
+    def __exit__(self, *exc_info: object) -> None:
+        self._stop.set()
+        self._thread.join()
+        _touch(self.path, time.time() + self.hold_s)
+
+
+def running_elsewhere(work_dir: str | os.PathLike, owner: str, lost_after_s: float) -> bool:
+    """Whether another entry task (not ``owner``) renewed the analysis' heartbeat within
+    ``lost_after_s``: then a new entry message is a duplicate of a live run."""
+    folder = AnalysisFolder(work_dir)
+    age = folder.heartbeat_age_s()
+    if age is None or age >= lost_after_s:
+        return False
+    try:
+        return json.loads(folder.heartbeat.read_text()).get("owner") != owner
+    except (OSError, ValueError, AttributeError):
+        return False  # unreadable: run it; a duplicate run is safe, a dropped one is not
+
+
+def _read_count(path: Path) -> int:
+    try:
+        return int(path.read_text().strip() or 0)
+    except (OSError, ValueError):
+        return 0
+
+
+@contextmanager
+def attempt(work_dir: str | os.PathLike, output: Path, *, max_crashes: int) -> Iterator[None]:
+    """Count one run of the stage that writes ``output`` until the body returns or raises.
+
+    Raises
+    ------
+    RepeatedCrash
+        ``max_crashes`` earlier runs of the stage started and never came back.
+    """
+    ledger = AnalysisFolder(work_dir).attempts(output)
+    crashes = _read_count(ledger)
+    if crashes >= max_crashes:
+        raise RepeatedCrash.after(crashes)
+    _write_atomic(ledger, str(crashes + 1))
+    try:
+        yield
+    finally:
+        # The run came back (whatever it ended with): it was no crash.
+        ledger.unlink(missing_ok=True)
+
+
+def interrupt_on_sigterm() -> None:
+    """In a pool process: turn SIGTERM into :class:`Interrupted`, so the running stage's
+    ``finally`` blocks run (its :func:`attempt` is not counted as a crash) before it exits."""
+
+    def handler(signum: int, frame: FrameType | None) -> None:
+        raise Interrupted(f"signal {signum}")
+
+    signal.signal(signal.SIGTERM, handler)
