@@ -83,7 +83,7 @@ def seed(session, settings, storage, *, out=print) -> None:
                 session.rollback()
                 log.warning("seed.reference_failed error=%s", exc)
     if settings.is_development:
-        for row in crud.list_api_keys(session, club_id=club.id):
+        for row in crud.list_api_keys(session, club_id=club.id)[0]:
             if row.name == DEV_KEY_NAME:
                 crud.revoke_api_key(session, row)
         _, key = crud.create_api_key(session, club_id=club.id, name=DEV_KEY_NAME)

@@ -8,7 +8,7 @@ from __future__ import annotations
 from datetime import datetime, timedelta
 from typing import Any
 
-from sqlalchemy import func, select
+from sqlalchemy import Select, func, select
 from sqlalchemy.orm import Session
 
 from app.core import security
@@ -74,10 +74,17 @@ def touch_api_key(session: Session, row: ApiKey) -> None:
         session.commit()
 
 
-def list_api_keys(session: Session, *, club_id: int) -> list[ApiKey]:
-    return list(
-        session.scalars(select(ApiKey).where(ApiKey.club_id == club_id).order_by(ApiKey.id))
-    )
+def page_of(session: Session, stmt: Select, *, limit: int, offset: int) -> tuple[list, int]:
+    """One page of ``stmt``'s rows and how many rows it has in all."""
+    total = session.scalar(select(func.count()).select_from(stmt.order_by(None).subquery()))
+    return list(session.scalars(stmt.limit(limit).offset(offset))), int(total or 0)
+
+
+def list_api_keys(
+    session: Session, *, club_id: int, limit: int = 1000, offset: int = 0
+) -> tuple[list[ApiKey], int]:
+    stmt = select(ApiKey).where(ApiKey.club_id == club_id).order_by(ApiKey.id)
+    return page_of(session, stmt, limit=limit, offset=offset)
 
 
 def get_api_key(session: Session, *, club_id: int, key_id: int) -> ApiKey | None:
@@ -130,15 +137,11 @@ def get_performer(session: Session, *, club_id: int, user_id: int) -> User | Non
     ).first()
 
 
-def list_performers(session: Session, *, club_id: int, limit: int, offset: int) -> list[User]:
-    stmt = (
-        select(User)
-        .where(User.club_id == club_id, User.role == "performer")
-        .order_by(User.id)
-        .limit(limit)
-        .offset(offset)
-    )
-    return list(session.scalars(stmt))
+def list_performers(
+    session: Session, *, club_id: int, limit: int, offset: int
+) -> tuple[list[User], int]:
+    stmt = select(User).where(User.club_id == club_id, User.role == "performer").order_by(User.id)
+    return page_of(session, stmt, limit=limit, offset=offset)
 
 
 def authenticate(session: Session, *, email: str, password: str) -> User | None:
@@ -174,15 +177,11 @@ def get_reference_by_name(session: Session, *, club_id: int, name: str) -> Refer
     ).first()
 
 
-def list_references(session: Session, *, club_id: int, limit: int, offset: int) -> list[Reference]:
-    stmt = (
-        select(Reference)
-        .where(Reference.club_id == club_id)
-        .order_by(Reference.id)
-        .limit(limit)
-        .offset(offset)
-    )
-    return list(session.scalars(stmt))
+def list_references(
+    session: Session, *, club_id: int, limit: int, offset: int
+) -> tuple[list[Reference], int]:
+    stmt = select(Reference).where(Reference.club_id == club_id).order_by(Reference.id)
+    return page_of(session, stmt, limit=limit, offset=offset)
 
 
 def reference_in_use(session: Session, reference: Reference) -> bool:

@@ -86,6 +86,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     errors.install(app)
     app.include_router(api_router, prefix=API_PREFIX)
     _mount_declared(app)
+    _document_page_size(app, settings.max_page_size)
 
     # Outermost last: body limits run first, then CORS (closed unless origins are set).
     app.add_middleware(
@@ -118,3 +119,22 @@ def _mount_declared(app: FastAPI) -> None:
     """Call every declared ``register(app)`` (``coach.mounts``), in name order."""
     for ep in sorted(entry_points(group=MOUNTS), key=lambda e: e.name):
         ep.load()(app)
+
+
+def _document_page_size(app: FastAPI, max_page_size: int) -> None:
+    """The OpenAPI document states this deployment's page size limit (``limit``'s maximum),
+    which the route signatures cannot: it is a setting, checked in ``get_page``."""
+    build = app.openapi
+
+    def openapi() -> dict:
+        if app.openapi_schema is not None:
+            return app.openapi_schema
+        doc = build()  # FastAPI keeps it as app.openapi_schema: edited once, here
+        for operation in (op for path in doc["paths"].values() for op in path.values()):
+            for p in operation.get("parameters", []):
+                if p.get("in") == "query" and p.get("name") == "limit":
+                    p["schema"]["maximum"] = max_page_size
+        return doc
+
+    app.openapi = openapi  # type: ignore[method-assign]
+

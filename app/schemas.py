@@ -6,7 +6,7 @@ Every string has a length limit and every list a size limit: nothing unbounded c
 from __future__ import annotations
 
 from datetime import datetime
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Generic, Literal, TypeVar
 
 from pydantic import (
     AnyHttpUrl,
@@ -208,11 +208,21 @@ class AnalysisPublic(_Orm):
     updated_at: datetime
 
 
-class AnalysesPublic(BaseModel):
-    items: list[AnalysisPublic]
+T = TypeVar("T")
+
+
+class ListPage(BaseModel, Generic[T]):
+    """Every list the API returns: one page of ``items`` (``limit`` from ``offset``) of
+    ``total`` rows."""
+
+    items: list[T]
     total: int
     limit: int
     offset: int
+
+
+class AnalysesPublic(ListPage[AnalysisPublic]):
+    pass
 
 
 class SegmentPublic(BaseModel):
@@ -284,3 +294,19 @@ class JoinedPublic(BaseModel):
     id: int
     display_name: str
     url: str
+
+
+class ApiKeysPublic(ListPage[ApiKeyPublic]):
+    pass
+
+
+class UsersPublic(ListPage[UserPublic]):
+    pass
+
+
+class ReferencesPublic(ListPage[ReferencePublic]):
+    pass
+
+
+class CommentsPublic(ListPage[CommentPublic]):
+    pass

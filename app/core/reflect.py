@@ -101,7 +101,7 @@ class Notifier:
         self._lock = threading.Lock()
 
     def __call__(self, analysis: Analysis) -> None:
-        if analysis.status not in ("done", "failed"):
+        if analysis.status not in TERMINAL_STATES:  # done, failed, cancelled
             return
         with self.session_factory() as session:
             club = crud.get_club(session, analysis.club_id)

@@ -203,6 +203,9 @@ def test_progress_is_reflected_and_result_is_409_until_done(client, club_ref, qu
     write_atomic(Path(work) / "result.json", RESULT)
     r = client.get(url + "/result", headers=h)
     assert r.status_code == 200 and r.json() == RESULT
+    lean = client.get(url + "/result?candidates=false", headers=h).json()
+    assert all("candidates" not in f and "selected" not in f for f in lean["frames"])
+    assert [f["joints_3d"] for f in lean["frames"]] == [f["joints_3d"] for f in RESULT["frames"]]
     got = client.get(url, headers=h).json()
     assert got["status"] == "done" and got["timings"] == {"total": 12.5}
     seg = client.get(url + "/segments", headers=h).json()["segments"][0]
@@ -310,6 +313,35 @@ def test_webhook_is_signed_and_retried(client, app, club_ref, queue, video_file)
     payload = json.loads(body)
     assert payload["event"] == "analysis.done" and payload["analysis"]["id"] == a["id"]
     assert payload["delivery_id"] == headers["X-Coach-Delivery"]
+
+
+@pytest.mark.settings(webhook_allow_private=True)
+def test_a_cancelled_analysis_is_announced_too(client, app, club_ref, queue, video_file):
+    server = HTTPServer(("127.0.0.1", 0), _Receiver)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    _Receiver.received, _Receiver.fail_first = [], 0
+    try:
+        url = f"http://127.0.0.1:{server.server_port}/hook"
+        client.patch("/api/v1/club", headers=club_ref.headers, json={"webhook_url": url})
+        a = upload(client, club_ref, video_file).json()
+        r = client.post(f"/api/v1/analyses/{a['id']}/cancel", headers=club_ref.headers)
+        assert r.status_code == 200
+        app.state.notifier.wait(timeout=10)
+        time.sleep(0.1)
+    finally:
+        server.shutdown()
+    events = [json.loads(body)["event"] for _, body in _Receiver.received]
+    assert events == ["analysis.cancelled"]
+
+
+def test_every_list_has_the_same_envelope(client, club_ref, video_file):
+    upload(client, club_ref, video_file)
+    for path in ("/analyses", "/references", "/performers", "/keys"):
+        r = client.get(f"/api/v1{path}?limit=1", headers=club_ref.headers)
+        assert r.status_code == 200, path
+        page = r.json()
+        assert set(page) == {"items", "total", "limit", "offset"}, path
+        assert page["limit"] == 1 and len(page["items"]) == 1 and page["total"] >= 1, path
 
 
 def test_api_docs_say_what_one_camera_measures(client):

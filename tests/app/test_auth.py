@@ -23,7 +23,7 @@ def test_keys_are_shown_once_listed_by_prefix_and_revocable(client, club):
     assert r.status_code == 201
     new = r.json()
     assert new["key"].startswith(new["prefix"])
-    listed = client.get("/api/v1/keys", headers=club.headers).json()
+    listed = client.get("/api/v1/keys", headers=club.headers).json()["items"]
     assert [k["prefix"] for k in listed if k["id"] == new["id"]] == [new["prefix"]]
     assert all("key" not in k for k in listed)
     new_headers = {"X-API-Key": new["key"]}
@@ -36,7 +36,7 @@ def test_keys_are_shown_once_listed_by_prefix_and_revocable(client, club):
 
 def test_other_clubs_keys_are_404(client, app, club):
     other = make_club(app, "beta")
-    keys = client.get("/api/v1/keys", headers=other.headers).json()
+    keys = client.get("/api/v1/keys", headers=other.headers).json()["items"]
     r = client.delete(f"/api/v1/keys/{keys[0]['id']}", headers=club.headers)
     assert r.status_code == 404
 

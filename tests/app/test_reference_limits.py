@@ -45,7 +45,7 @@ def test_a_bvh_bomb_is_refused_at_once(client, club, settings, tmp_path, frames,
     assert r.json()["error"]["code"] == "invalid_reference"
     assert says in r.json()["error"]["message"]
     assert seconds < 1.0, seconds
-    assert client.get("/api/v1/references", headers=club.headers).json() == []
+    assert client.get("/api/v1/references", headers=club.headers).json()["items"] == []
     assert stored_files(settings) == []
 
 

@@ -12,7 +12,7 @@ def _upload(client, club, bvh_file, domain: bytes | None = None):
 
 def test_reference_upload_list_get_delete(client, club_ref, settings):
     h = club_ref.headers
-    listed = client.get("/api/v1/references", headers=h).json()
+    listed = client.get("/api/v1/references", headers=h).json()["items"]
     assert [r["name"] for r in listed] == ["swing"]
     ref = client.get(f"/api/v1/references/{club_ref.reference_id}", headers=h).json()
     assert ref["derived"]["frames"] == 580 and ref["derived"]["fps"] > 100
@@ -34,7 +34,7 @@ def test_unmappable_bvh_is_422_naming_missing_joints(client, club, bvh_file, tmp
     assert r.status_code == 422
     assert r.json()["error"]["code"] == "invalid_reference"
     assert "l_elbow" in r.json()["error"]["message"]
-    assert client.get("/api/v1/references", headers=club.headers).json() == []
+    assert client.get("/api/v1/references", headers=club.headers).json()["items"] == []
     assert stored_files(settings) == []
 
 
@@ -79,7 +79,7 @@ def test_other_clubs_reference_is_404(client, app, club_ref):
     url = f"/api/v1/references/{club_ref.reference_id}"
     assert client.get(url, headers=other.headers).status_code == 404
     assert client.delete(url, headers=other.headers).status_code == 404
-    assert client.get("/api/v1/references", headers=other.headers).json() == []
+    assert client.get("/api/v1/references", headers=other.headers).json()["items"] == []
 
 
 def test_performers(client, club):
@@ -87,9 +87,8 @@ def test_performers(client, club):
     r = client.post("/api/v1/performers", headers=club.headers, json=body)
     assert r.status_code == 201 and r.json()["role"] == "performer"
     assert client.post("/api/v1/performers", headers=club.headers, json=body).status_code == 409
-    names = [
-        p["display_name"] for p in client.get("/api/v1/performers", headers=club.headers).json()
-    ]
+    listed = client.get("/api/v1/performers", headers=club.headers).json()["items"]
+    names = [p["display_name"] for p in listed]
     assert names == ["Performer", "Ann"]
 
 

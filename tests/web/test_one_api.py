@@ -96,4 +96,6 @@ def test_comments_are_written_by_people(env):  # noqa: F811
     assert client.post(base, headers=key, json={"body": "hi"}).status_code == 403
     sign_in(client, "p@a.org")
     assert client.post(base, json={"body": "my knee?"}).status_code == 201
-    assert [c["body"] for c in client.get(base, headers=key).json()] == ["my knee?"]
+    listed = client.get(base, headers=key).json()
+    assert [c["body"] for c in listed["items"]] == ["my knee?"]
+    assert listed["total"] == 1

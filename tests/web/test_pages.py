@@ -211,21 +211,21 @@ def test_comments_pinned_and_persisted(env):
     assert client.post(base, json={"body": "elbow!", "frame": 3}).status_code == 201
     assert client.post(base, json={"body": "slow top", "segment": 1}).status_code == 201
     assert client.post(base, json={"body": ""}).status_code == 422
-    items = client.get(base).json()
+    items = client.get(base).json()["items"]
     assert [(c["body"], c["frame"], c["segment"]) for c in items] == [
         ("elbow!", 3, None), ("slow top", None, 1)]  # fmt: skip
     sign_in(client, "p@a.org")  # the performer reads the coach's comments but cannot delete them
-    assert len(client.get(base).json()) == 2
+    assert client.get(base).json()["total"] == 2
     assert client.delete(f"{base}/{items[0]['id']}").status_code == 403
     sign_in(client, "c@a.org")
     assert client.delete(f"{base}/{items[0]['id']}").status_code == 204
-    assert len(client.get(base).json()) == 1
+    assert client.get(base).json()["total"] == 1
 
 
 def test_reference_thumbnail_and_domain_edit(env):
     _, client, ids, _, settings = env
     sign_in(client, "c@a.org")
-    refs = client.get("/api/v1/references").json()
+    refs = client.get("/api/v1/references").json()["items"]
     assert refs[0]["segment_names"] == ["segment 1", "segment 2"]
     svg = client.get(refs[0]["thumbnail"])
     assert svg.status_code == 200 and svg.text.startswith("<svg") and svg.text.count("<line") == 16

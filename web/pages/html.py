@@ -96,7 +96,7 @@ def upload(request: Request, session: SessionDep):
     if user is None:
         return _sign_in(request)
     performers = (
-        crud.list_performers(session, club_id=user.club_id, limit=1000, offset=0)
+        crud.list_performers(session, club_id=user.club_id, limit=1000, offset=0)[0]
         if user.role == "coach" else []
     )  # fmt: skip
     return _render(
@@ -192,8 +192,8 @@ def dashboard(
     )  # fmt: skip
     for a in items:
         reflect(session, a, on_final=notifier)
-    performers = crud.list_performers(session, club_id=user.club_id, limit=1000, offset=0)
-    references = crud.list_references(session, club_id=user.club_id, limit=1000, offset=0)
+    performers = crud.list_performers(session, club_id=user.club_id, limit=1000, offset=0)[0]
+    references = crud.list_references(session, club_id=user.club_id, limit=1000, offset=0)[0]
     query = {"performer": performer, "reference": reference, "status": status,
              "since": since, "until": until}  # fmt: skip
     return _render(

@@ -368,7 +368,7 @@
 
   // ---------------------------------------------------------------- comments
   async function loadComments() {
-    const items = await coach.api(base + "/comments");
+    const items = (await coach.api(base + "/comments?limit=100")).items;
     const ul = $("comments");
     ul.textContent = "";
     if (!items.length) ul.append(coach.el("li", { class: "muted", text: "No comments yet." }));

@@ -82,7 +82,7 @@
   }
 
   async function load() {
-    const refs = await coach.api("/api/v1/references?limit=100");
+    const refs = (await coach.api("/api/v1/references?limit=100")).items;
     listEl.textContent = "";
     if (!refs.length) listEl.append(coach.el("p", { class: "muted", text: "No references yet." }));
     refs.forEach(function (r) { listEl.append(card(r)); });

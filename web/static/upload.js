@@ -41,7 +41,8 @@
     return e.message.charAt(0).toUpperCase() + e.message.slice(1) + ".";
   }
 
-  coach.api("/api/v1/references?limit=100").then(function (refs) {
+  coach.api("/api/v1/references?limit=100").then(function (page) {
+    const refs = page.items;
     list.textContent = "";
     if (!refs.length) { list.append(coach.el("p", { text: "No reference motions yet: ask your coach to add one." })); return; }
     refs.forEach(function (r, i) {

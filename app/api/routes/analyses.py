@@ -11,7 +11,7 @@ from typing import IO, Annotated, Any
 
 from fastapi import APIRouter, File, Form, Header, Query, Request, Response, UploadFile
 from fastapi.concurrency import run_in_threadpool
-from fastapi.responses import FileResponse, PlainTextResponse, StreamingResponse
+from fastapi.responses import FileResponse, JSONResponse, PlainTextResponse, StreamingResponse
 from sqlalchemy.exc import IntegrityError
 from starlette.background import BackgroundTask
 
@@ -303,10 +303,20 @@ def read_analysis(
     responses={200: {"content": {"application/json": {}}}} | errors(404, 409),
 )
 def read_result(
-    analysis_id: str, who: CurrentPrincipal, session: SessionDep, notifier: NotifierDep
-):
+    analysis_id: str, who: CurrentPrincipal, session: SessionDep, notifier: NotifierDep,
+    candidates: Annotated[bool, Query(
+        description="false leaves out every frame's `candidates` (three quarters of the "
+        "document); `selected` then indexes nothing and is left out too."
+    )] = True,
+):  # fmt: skip
     analysis = done_analysis(session, who, analysis_id, notifier)
-    return FileResponse(analysis.result_path, media_type="application/json")
+    if candidates:
+        return FileResponse(analysis.result_path, media_type="application/json")
+    doc = json.loads(Path(analysis.result_path).read_text())
+    for frame in doc.get("frames", []):
+        frame.pop("candidates", None)
+        frame.pop("selected", None)
+    return JSONResponse(doc)
 
 
 @router.get(
@@ -410,6 +420,7 @@ def cancel_analysis(
     analysis.status = "cancelled"
     analysis.message = "cancelled on request"
     session.commit()
+    notifier(analysis)  # the club hears of it like of done and failed ones
     return analysis
 
 

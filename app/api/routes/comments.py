@@ -8,11 +8,11 @@ from fastapi import APIRouter, Request, Response
 from sqlalchemy import select
 
 from app.api.access import analysis_for
-from app.api.deps import CREATED, CurrentPrincipal, SessionDep, location
+from app.api.deps import CREATED, CurrentPrincipal, PageDep, SessionDep, location
 from app.api.errors import ApiError, errors, not_found
 from app.api.params import DbId
 from app.models import Analysis, Comment
-from app.schemas import CommentCreate, CommentPublic
+from app.schemas import CommentCreate, CommentPublic, CommentsPublic
 
 router = APIRouter(
     prefix="/analyses/{analysis_id}/comments", tags=["comments"], responses=errors(401, 404, 429)
@@ -39,10 +39,15 @@ def comment_rows(session, analysis: Analysis) -> list[Comment]:
     return list(session.scalars(q.order_by(Comment.frame.is_(None), Comment.frame, Comment.id)))
 
 
-@router.get("", response_model=list[CommentPublic], summary="The analysis' comments")
-def list_comments(analysis_id: str, who: CurrentPrincipal, session: SessionDep):
+@router.get(
+    "", response_model=CommentsPublic,
+    summary="The analysis' comments, pinned ones first by frame, then the rest in order",
+)  # fmt: skip
+def list_comments(analysis_id: str, who: CurrentPrincipal, session: SessionDep, page: PageDep):
     a = analysis_for(session, who, analysis_id)
-    return [comment_public(c) for c in comment_rows(session, a)]
+    rows = comment_rows(session, a)
+    items = [comment_public(c) for c in rows[page.offset : page.offset + page.limit]]
+    return CommentsPublic(items=items, total=len(rows), limit=page.limit, offset=page.offset)
 
 
 def _comment_of(session, analysis: Analysis, comment_id: int) -> Comment:

@@ -1,10 +1,10 @@
 from fastapi import APIRouter, Request, Response
 
 from app import crud
-from app.api.deps import CREATED, CoachClub, SessionDep, location
+from app.api.deps import CREATED, CoachClub, PageDep, SessionDep, location
 from app.api.errors import errors, not_found
 from app.api.params import DbId
-from app.schemas import ApiKeyCreate, ApiKeyCreated, ApiKeyPublic
+from app.schemas import ApiKeyCreate, ApiKeyCreated, ApiKeyPublic, ApiKeysPublic
 
 router = APIRouter(prefix="/keys", tags=["keys"], responses=errors(401, 429))
 
@@ -30,9 +30,12 @@ def create_key(
     return ApiKeyCreated(**ApiKeyPublic.model_validate(row).model_dump(), key=key)
 
 
-@router.get("", response_model=list[ApiKeyPublic], summary="The club's keys (prefixes only)")
-def list_keys(club: CoachClub, session: SessionDep):
-    return crud.list_api_keys(session, club_id=club.id)
+@router.get("", response_model=ApiKeysPublic, summary="The club's keys (prefixes only)")
+def list_keys(club: CoachClub, session: SessionDep, page: PageDep):
+    items, total = crud.list_api_keys(
+        session, club_id=club.id, limit=page.limit, offset=page.offset
+    )
+    return ApiKeysPublic(items=items, total=total, limit=page.limit, offset=page.offset)
 
 
 @router.get(

@@ -19,7 +19,7 @@ from app.core import compare
 from app.core.reflect import reflect
 from app.core.summary import segment_names
 from app.models import Analysis, User
-from app.schemas import PerformerCreate, UserPublic
+from app.schemas import PerformerCreate, UserPublic, UsersPublic
 
 router = APIRouter(prefix="/performers", tags=["performers"], responses=errors(401, 429))
 
@@ -49,9 +49,12 @@ def create_performer(
     return user
 
 
-@router.get("", response_model=list[UserPublic], summary="The club's performers")
+@router.get("", response_model=UsersPublic, summary="The club's performers")
 def list_performers(club: CoachClub, session: SessionDep, page: PageDep):
-    return crud.list_performers(session, club_id=club.id, limit=page.limit, offset=page.offset)
+    items, total = crud.list_performers(
+        session, club_id=club.id, limit=page.limit, offset=page.offset
+    )
+    return UsersPublic(items=items, total=total, limit=page.limit, offset=page.offset)
 
 
 @router.get(

@@ -22,7 +22,7 @@ from app.api.errors import ApiError, errors
 from app.api.params import DbId
 from app.core import media, validation
 from app.core.storage import Storage, UploadTooLarge
-from app.schemas import DomainUpdate, ReferencePublic
+from app.schemas import DomainUpdate, ReferencePublic, ReferencesPublic
 from engine.errors import InvalidInput
 
 router = APIRouter(prefix="/references", tags=["references"], responses=errors(401, 429))
@@ -114,9 +114,15 @@ async def create_reference(
         Storage.remove(tmp)
 
 
-@router.get("", response_model=list[ReferencePublic], summary="The club's references")
+@router.get("", response_model=ReferencesPublic, summary="The club's references")
 def list_references(who: CurrentPrincipal, session: SessionDep, page: PageDep):
-    return crud.list_references(session, club_id=who.club.id, limit=page.limit, offset=page.offset)
+    items, total = crud.list_references(
+        session, club_id=who.club.id, limit=page.limit, offset=page.offset
+    )
+    return ReferencesPublic(
+        items=[ReferencePublic.model_validate(r) for r in items], total=total,
+        limit=page.limit, offset=page.offset,
+    )  # fmt: skip
 
 
 @router.get(
