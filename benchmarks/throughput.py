@@ -143,8 +143,11 @@ def tiny_video(out: Path, frames: int = 16, size: tuple[int, int] = (120, 160)) 
     return out
 
 
-def start_api(root: Path, env: dict, rate: float) -> tuple[subprocess.Popen, str, str]:
-    """``coach serve --no-worker`` on a free port; returns the process, base URL and API key."""
+def start_api(
+    root: Path, env: dict, rate: float, *, worker: bool = False
+) -> tuple[subprocess.Popen, str, str]:
+    """``coach serve --no-worker`` (or with its embedded worker) on a free port; returns the
+    process, base URL and API key."""
     import httpx
 
     port = free_port()
@@ -156,8 +159,8 @@ def start_api(root: Path, env: dict, rate: float) -> tuple[subprocess.Popen, str
     log_path = root / "api.log"
     log = open(log_path, "ab")  # noqa: SIM115 - closed with the process
     proc = subprocess.Popen(
-        [sys.executable, "-m", "app.cli", "serve", "--no-worker", "--host", "127.0.0.1",
-         "--port", str(port), "--data-dir", str(root / "api-data")],
+        [sys.executable, "-m", "app.cli", "serve", *([] if worker else ["--no-worker"]),
+         "--host", "127.0.0.1", "--port", str(port), "--data-dir", str(root / "api-data")],
         env=api_env, cwd=REPO, stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
     )  # fmt: skip
     log.close()
@@ -185,8 +188,8 @@ def create_analysis(base: str, key: str, video: Path) -> str:
 
     headers = {"X-API-Key": key}
     with httpx.Client(base_url=base, headers=headers, timeout=30) as client:
-        refs = client.get("/api/v1/references").raise_for_status().json()
-        performers = client.get("/api/v1/performers").raise_for_status().json()
+        refs = client.get("/api/v1/references").raise_for_status().json()["items"]
+        performers = client.get("/api/v1/performers").raise_for_status().json()["items"]
         if not refs or not performers:
             raise SystemExit("the demo club has no reference or performer (is 64_29.bvh there?)")
         with video.open("rb") as fh:

@@ -95,8 +95,14 @@ def start(
     return _process
 
 
+#: Niceness of the embedded worker: its stages use every core, and the API in the parent
+#: process must still answer a status poll at once.
+WORKER_NICENESS = 10
+
+
 def _die_with_parent() -> None:
-    """In the child before exec: get SIGTERM when the server process dies (Linux).
+    """In the child before exec: get SIGTERM when the server process dies (Linux), and yield
+    the CPU to the API (:data:`WORKER_NICENESS`).
 
     stop() covers a clean shutdown; this covers a killed server, which would otherwise leave
     an orphan worker consuming the queue. Elsewhere the call is skipped.
@@ -108,6 +114,7 @@ def _die_with_parent() -> None:
         libc.prctl(1, signal.SIGTERM)  # 1 = PR_SET_PDEATHSIG
     except (OSError, AttributeError):
         pass
+    os.nice(WORKER_NICENESS)
 
 
 def running() -> bool:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from functools import lru_cache
 from pathlib import Path
 from typing import Literal
@@ -28,7 +29,11 @@ class Settings(BaseSettings):
     secret_key: str = ""
     #: "embedded" runs a local worker without Redis (``coach serve``); else a Celery broker URL.
     broker_url: str = "embedded"
-    worker_concurrency: int = Field(default=1, ge=1, le=64)
+    #: Processes of the embedded worker (``coach serve``): one per core, so an analysis' stage-3
+    #: parts run side by side.
+    worker_concurrency: int = Field(
+        default_factory=lambda: len(os.sched_getaffinity(0)), ge=1, le=64
+    )
     #: Engine settings preset sent with every analysis ("fast" for demos and tests); "" = default.
     engine_preset: str = ""
     #: Bearer token of ``GET /api/v1/metrics`` (the operator's scraper); empty turns them off.

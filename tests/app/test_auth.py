@@ -103,3 +103,11 @@ def test_metrics_are_prometheus_text_for_the_operators_token_only(client, settin
     assert r.status_code == 200
     assert r.headers["content-type"].startswith("text/plain")
     assert 'coach_analyses_total{state="done"} 1' in r.text
+
+
+def test_the_embedded_worker_uses_every_core_by_default():
+    import os
+
+    from app.core.config import Settings
+
+    assert Settings().worker_concurrency == len(os.sched_getaffinity(0))

@@ -33,6 +33,8 @@ def test_embedded_end_to_end(embedded_worker, tmp_path, short_video):
     data, proc = embedded_worker
     assert celery_app.current_settings().embedded
     assert embedded.running()
+    # the worker yields the CPU to the API in the parent (status polls stay fast)
+    assert os.getpriority(os.PRIO_PROCESS, proc.pid) >= embedded.WORKER_NICENESS
     job = make_job(tmp_path, short_video, "e-1", dict(ENGINE_CHEAP_SETTINGS))
     task_id = celery_app.enqueue(job)
     status = wait_for(job.work_dir, finished, 150)
