@@ -11,7 +11,7 @@ from fastapi.security import APIKeyHeader, HTTPAuthorizationCredentials, HTTPBea
 from sqlalchemy.orm import Session
 
 from app import crud
-from app.api.errors import ApiError, invalid
+from app.api.errors import ApiError, invalid, rate_limited
 from app.core import sessions
 from app.core.config import Settings
 from app.core.queue import JobQueue, get_queue
@@ -63,11 +63,7 @@ def _check_key(request: Request, session: Session, key: str, scheme: str) -> Api
     limiter: RateLimiter = request.app.state.rate_limiter
     wait = limiter.take(row.id)
     if wait > 0:
-        retry = limiter.retry_after(wait)
-        raise ApiError(
-            429, "rate_limited", f"too many requests for this key; retry in {retry} s",
-            {"retry_after_s": retry}, headers={"Retry-After": str(retry)},
-        )  # fmt: skip
+        raise rate_limited(wait, "too many requests for this key")
     crud.touch_api_key(session, row)
     return row
 

@@ -6,6 +6,7 @@ unknown paths, 405) are rewritten into the same shape by the handlers installed 
 
 from __future__ import annotations
 
+import math
 import re
 from http import HTTPStatus
 from typing import Any
@@ -42,6 +43,15 @@ class ApiError(Exception):
 
 def not_found(what: str, ident: object) -> ApiError:
     return ApiError(404, "not_found", f"{what} {ident} does not exist", {"id": str(ident)})
+
+
+def rate_limited(wait_s: float, why: str) -> ApiError:
+    """A 429 telling when to come back (``Retry-After``, whole seconds)."""
+    retry = max(1, math.ceil(wait_s))
+    return ApiError(
+        429, "rate_limited", f"{why}; try again in {retry} s", {"retry_after_s": retry},
+        headers={"Retry-After": str(retry)},
+    )  # fmt: skip
 
 
 def error_response(

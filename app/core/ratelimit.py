@@ -6,7 +6,6 @@ acceptable for abuse protection; a shared limit would need Redis.
 
 from __future__ import annotations
 
-import math
 import threading
 import time
 
@@ -29,10 +28,6 @@ class RateLimiter:
                 return 0.0
             self._buckets[key] = (tokens, now)
             return (1.0 - tokens) / self.rate
-
-    @staticmethod
-    def retry_after(wait_s: float) -> int:
-        return max(1, math.ceil(wait_s))
 
 
 class SignInThrottle:

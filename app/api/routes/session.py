@@ -4,9 +4,9 @@ from fastapi import APIRouter, Request, Response
 
 from app import crud
 from app.api.deps import CurrentUser, SessionDep, SettingsDep
-from app.api.errors import ApiError, errors
+from app.api.errors import ApiError, errors, rate_limited
 from app.core import security, sessions
-from app.core.ratelimit import RateLimiter, SignInThrottle
+from app.core.ratelimit import SignInThrottle
 from app.schemas import LoginRequest, PasswordChange, UserPublic
 
 router = APIRouter(prefix="/session", tags=["session"])
@@ -33,11 +33,7 @@ def sign_in(body: LoginRequest, request: Request, session: SessionDep, settings:
     keys = throttle.keys(body.email, _client_ip(request))
     wait = throttle.wait(keys)
     if wait > 0:
-        retry = RateLimiter.retry_after(wait)
-        raise ApiError(
-            429, "rate_limited", f"too many failed sign-ins; try again in {retry} s",
-            {"retry_after_s": retry}, headers={"Retry-After": str(retry)},
-        )  # fmt: skip
+        raise rate_limited(wait, "too many failed sign-ins")
     user = crud.authenticate(session, email=body.email, password=body.password)
     if user is None:
         throttle.failed(keys)
