@@ -129,15 +129,54 @@ def assess_fit(
         ]
         summary["fit"]["keypoint_off_frames"] = int(off.sum())
         if message is None and off.mean() > settings.poor_fit_frames:
-            message = (
-                f"Your body and the expert's motion part ways in {100 * off.mean():.0f} % of "
-                "the frames: the video may hold several repetitions, or another motion than "
-                "the reference. Trim it to one repetition of the reference's motion, from its "
-                "first posture to its last."
-            )
+            reps = _repetitions(prepared)
+            message = _apart_message(float(off.mean()), reps)
+            if reps:
+                summary["repetitions"] = reps
     if message is not None:
         summary["status"] = "poor_fit"
         summary["messages"] = [message, *summary["messages"]]
+
+
+def _repetitions(prepared: Prepared) -> list[dict]:
+    """The repetitions of the reference's motion the keypoints show, when more than one
+    (:func:`engine.stages.repetitions.excursions`): video frames and seconds."""
+    from engine.stages.repetitions import excursions
+
+    if prepared.keypoints is None:
+        return []
+    start = prepared.camera.project(prepared.reference_joints[prepared.first_motion_frame][None])
+    fps = prepared.video.fps
+    reps = excursions(prepared.keypoints, start[0], fps)
+    if len(reps) < 2:
+        return []
+    return [
+        {"start": r.start, "end": r.end,
+         "start_s": round(r.start / fps, 2), "end_s": round(r.end / fps, 2)}
+        for r in reps
+    ]  # fmt: skip
+
+
+def _apart_message(share: float, repetitions: list[dict]) -> str:
+    """What to do when the reported motion leaves the body in ``share`` of the frames."""
+    said = f"Your body and the expert's motion part ways in {100 * share:.0f} % of the frames"
+    if repetitions:
+        spans = ", ".join(f"{_clock(r['start_s'])}-{_clock(r['end_s'])}" for r in repetitions)
+        return (
+            f"{said}: the video holds {len(repetitions)} whole repetitions ({spans}) and the "
+            "reference one. Trim the video to one of them and upload it again."
+        )
+    return (
+        f"{said}: the video may hold several repetitions, or another motion than the "
+        "reference. Trim it to one repetition of the reference's motion, from its first "
+        "posture to its last."
+    )
+
+
+def _clock(seconds: float) -> str:
+    """``m:ss.s`` as a video player shows it."""
+    minutes, rest = divmod(seconds, 60.0)
+    return f"{int(minutes)}:{rest:04.1f}"
 
 
 def _worst_keypoint(postures: np.ndarray, prepared: Prepared) -> np.ndarray | None:

@@ -22,6 +22,10 @@ yet. On the real squat clips, with d_A + d_K of the reference as calibrated (abs
 relative to each frame's best posture), it split 65 frames of four shallow squats into two
 "repetitions" (the reference is one deep squat, and at 5 fps a descent takes one or two
 frames), so it is not wired in. See docs/perception.md, "Repetitions".
+
+:func:`excursions` is the cheaper cue that is wired in: where the reported motion leaves the
+body (``poor_fit``), :func:`engine.stages.assessment.assess_fit` names the whole repetitions
+it finds, so the performer knows where to trim.
 """
 
 from __future__ import annotations
@@ -143,3 +147,88 @@ def _runs(path: np.ndarray, d: np.ndarray, n_c: int, min_frames: int) -> list[Re
             out.append(Repetition(int(t), int(u + 1), float(d[rows, path[rows]].mean())))
         t = u + 1
     return out
+
+
+#: Left/right joint pairs (DESIGN.md order) whose midpoints describe a posture whatever side
+#: the detector calls left: hips, knees, ankles, shoulders, elbows, wrists.
+_SIDE_PAIRS = ((1, 4), (2, 5), (3, 6), (9, 12), (10, 13), (11, 14))
+_HIP, _NECK = 0, 15
+
+
+def posture_descriptor(joints_2d: np.ndarray) -> np.ndarray:
+    """Side midpoints and the neck, relative to the hip and in body heights.
+
+    Parameters
+    ----------
+    joints_2d : ndarray, shape (T', 17, 2)
+        Image positions (keypoints, or projected joints); NaN where unknown.
+
+    Returns
+    -------
+    ndarray, shape (T', 7, 2)
+        Unchanged by a left/right swap of the labels (the detector swaps in 10-66 % of the
+        frames, docs/perception.md) and by where the performer stands or how large he is.
+    """
+    j = np.asarray(joints_2d, dtype=float)
+    mids = [np.nanmean(j[:, list(p)], axis=1) for p in _SIDE_PAIRS] + [j[:, _NECK]]
+    ankles_to_neck = np.linalg.norm(mids[2] - j[:, _NECK], axis=-1)
+    height = np.nanmedian(ankles_to_neck) if np.isfinite(ankles_to_neck).any() else np.nan
+    return (np.stack(mids, axis=1) - j[:, _HIP][:, None]) / max(float(height), 1e-9)
+
+
+#: Smallest posture change that counts as leaving the rest posture, in body heights: well
+#: above keypoint noise (~0.01), well below a squat's or a swing's (0.25-0.4 on the real clips).
+MIN_EXCURSION = 0.05
+
+
+def excursions(
+    keypoints: np.ndarray, start_posture: np.ndarray, fps: float, *, min_s: float = 0.4
+) -> list[Repetition]:
+    """Where the performer leaves the reference's starting posture and comes back to it.
+
+    Beyond the thesis. A cheaper cue than :func:`find_repetitions` for a video that holds
+    several repetitions of a one-repetition reference (docs/perception.md, "Repetitions"):
+    the distance e(t') of each frame's :func:`posture_descriptor` to the rest posture, and
+    the runs where e exceeds half its 95th percentile (and :data:`MIN_EXCURSION`). The rest
+    posture is the median of the video frames closest to the reference's first posture (a
+    fifth of them): the reference says which posture is the start, the video how this
+    performer holds it. Runs under half the typical one's length are something else.
+
+    Parameters
+    ----------
+    keypoints : ndarray, shape (T', 17, 2)
+    start_posture : ndarray, shape (17, 2)
+        The reference's first posture as the calibrated camera sees it.
+    fps : float
+    min_s : float
+        Shortest excursion kept, seconds.
+
+    Returns
+    -------
+    list of Repetition
+        Complete excursions only (the performer is back at rest before the video ends), in
+        video order; ``mean_cost`` is the excursion's mean e.
+    """
+    x = posture_descriptor(keypoints)
+    ref = posture_descriptor(np.asarray(start_posture, dtype=float)[None])[0]
+    to_ref = np.sqrt(np.nanmean(np.sum((x - ref) ** 2, axis=-1), axis=-1))
+    if not np.isfinite(to_ref).any():
+        return []
+    near = to_ref <= np.nanpercentile(to_ref, 20)
+    rest = np.nanmedian(x[near], axis=0)
+    e = np.nan_to_num(np.sqrt(np.nanmean(np.sum((x - rest) ** 2, axis=-1), axis=-1)))
+    away = e > max(0.5 * np.percentile(e, 95), MIN_EXCURSION)
+    out, t, n = [], 0, len(e)
+    while t < n:
+        if not away[t]:
+            t += 1
+            continue
+        start = t
+        while t < n and away[t]:
+            t += 1
+        if t < n and (t - start) / fps >= min_s:
+            out.append(Repetition(start, t, float(e[start:t].mean())))
+    # a repetition lasts about as long as the others: half the typical one is something else
+    # (re-racking a bar, a step to the side)
+    typical = float(np.median([r.end - r.start for r in out])) if out else 0.0
+    return [r for r in out if r.end - r.start >= 0.5 * typical]

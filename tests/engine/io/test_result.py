@@ -81,6 +81,20 @@ def test_invalid_results_fail(result_doc, mutate, match):
         validate_result(bad)
 
 
+def test_a_poor_fit_result_with_its_repetitions_is_written(result_doc, tmp_path):
+    """Every status the engine gives must pass the schema: ``coach analyze`` could not
+    write a ``poor_fit`` result."""
+    doc = copy.deepcopy(result_doc)
+    doc["summary"].update(
+        status="poor_fit",
+        repetitions=[{"start": 4, "end": 18, "start_s": 0.8, "end_s": 3.6}],
+    )
+    write_result(doc, tmp_path / "result.json")
+    doc["summary"]["repetitions"][0].pop("end_s")
+    with pytest.raises(InvalidInput, match="end_s"):
+        validate_result(doc)
+
+
 def test_read_result_errors(tmp_path):
     with pytest.raises(InvalidInput, match="does not exist"):
         read_result_doc(tmp_path / "nope.json")

@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from engine.errors import InvalidInput
-from engine.stages.repetitions import find_repetitions
+from engine.stages.repetitions import excursions, find_repetitions
 
 
 def _path(length: int, n_c: int) -> np.ndarray:
@@ -93,3 +93,66 @@ def test_validation():
         find_repetitions(np.zeros((5, 4)), window=0, idle_cost=0.5)
     with pytest.raises(InvalidInput, match="idle_cost"):
         find_repetitions(np.zeros((5, 4)), window=2, idle_cost=float("nan"))
+
+
+# ---- excursions: repetitions from the keypoints' own motion
+STAND = np.array([
+    [50, 100], [55, 100], [55, 140], [55, 180], [45, 100], [45, 140], [45, 180],
+    [50, 85], [50, 70], [60, 60], [62, 80], [62, 100], [40, 60], [38, 80], [38, 100],
+    [50, 58], [50, 40],
+], dtype=float)  # fmt: skip
+
+
+def _squat_frames(depth: np.ndarray) -> np.ndarray:
+    """(T', 17, 2) keypoints of a front-facing squat: hips and everything above them drop by
+    ``depth`` (0 standing, 1 deep) while the knees come forward and the ankles stay."""
+    kp = np.repeat(STAND[None], len(depth), axis=0)
+    upper = [0, 1, 4, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16]
+    kp[:, upper, 1] += 40 * depth[:, None]
+    kp[:, [2, 5], 1] += 15 * depth[:, None]
+    kp[:, [2, 5], 0] += np.array([8, -8]) * depth[:, None]
+    return kp
+
+
+def _squats(spans: list[tuple[int, int]], n: int) -> np.ndarray:
+    depth = np.zeros(n)
+    for a, b in spans:
+        depth[a:b] = np.sin(np.linspace(0, np.pi, b - a))
+    return depth
+
+
+def test_excursions_finds_each_whole_squat_not_the_cut_one(rng):
+    fps = 10.0
+    depth = _squats([(10, 30), (45, 65)], 100)
+    depth[85:] = np.sin(np.linspace(0, 0.6 * np.pi, 15))  # the third is cut near its bottom
+    kp = _squat_frames(depth) + rng.normal(0, 0.5, (100, 17, 2))
+    swapped = rng.random(100) < 0.4  # the detector swaps left and right in 40 % of frames
+    pairs = [(1, 4), (2, 5), (3, 6), (9, 12), (10, 13), (11, 14)]
+    for a, b in pairs:
+        kp[swapped, a], kp[swapped, b] = kp[swapped, b].copy(), kp[swapped, a].copy()
+    reps = excursions(kp, STAND, fps)
+    found = [t for r in reps for t in (r.start, r.end)]
+    assert found == pytest.approx([13, 27, 48, 62], abs=2)
+
+
+def test_excursions_ignores_a_short_blip_and_a_still_video(rng):
+    fps = 10.0
+    depth = _squats([(10, 30), (45, 65), (75, 79)], 100)  # the last: a 0.4 s dip, re-racking
+    reps = excursions(_squat_frames(depth), STAND, fps)
+    assert len(reps) == 2
+    still = _squat_frames(np.zeros(50)) + rng.normal(0, 0.5, (50, 17, 2))
+    assert excursions(still, STAND, fps) == []  # keypoint noise is no motion
+
+
+def test_the_rest_posture_comes_from_the_reference_not_the_calmest_frames():
+    """At 5 fps a performer dwells as long at the bottom of a squat as standing; the rest
+    posture must still be standing because the reference starts standing."""
+    fps = 5.0
+    depth = np.zeros(60)
+    for a in (5, 25, 45):  # down fast, hold the bottom, up fast
+        depth[a : a + 2] = [0.5, 1.0]
+        depth[a + 2 : a + 9] = 1.0
+        depth[a + 9 : a + 11] = [1.0, 0.5]
+    reps = excursions(_squat_frames(depth), STAND, fps)
+    found = [t for r in reps for t in (r.start, r.end)]
+    assert found == pytest.approx([5, 16, 25, 36, 45, 56], abs=1)
