@@ -12,7 +12,7 @@ from sqlalchemy import Select, func, select
 from sqlalchemy.orm import Session
 
 from app.core import security
-from app.models import Analysis, ApiKey, Club, Reference, User, utcnow
+from app.models import Analysis, ApiKey, Club, Reference, User, WebhookEndpoint, utcnow
 
 #: last_used_at is written at most this often per key (one write per request is wasteful).
 LAST_USED_RESOLUTION = timedelta(seconds=60)
@@ -47,6 +47,90 @@ def update_club(
         club.webhook_secret = new_secret = security.new_webhook_secret()
     session.commit()
     return new_secret
+
+
+# ---- webhook endpoints
+def create_webhook_endpoint(
+    session: Session, *, club_id: int, url: str, events: list[str], description: str
+) -> WebhookEndpoint:
+    row = WebhookEndpoint(
+        club_id=club_id, url=url, events=events, description=description,
+        secret=security.new_webhook_secret(),
+    )  # fmt: skip
+    session.add(row)
+    session.commit()
+    return row
+
+
+def count_webhook_endpoints(session: Session, *, club_id: int) -> int:
+    stmt = select(func.count()).where(WebhookEndpoint.club_id == club_id)
+    return int(session.scalar(stmt) or 0)
+
+
+def list_webhook_endpoints(
+    session: Session, *, club_id: int, limit: int, offset: int
+) -> tuple[list[WebhookEndpoint], int]:
+    stmt = select(WebhookEndpoint).where(WebhookEndpoint.club_id == club_id)
+    return page_of(session, stmt.order_by(WebhookEndpoint.id), limit=limit, offset=offset)
+
+
+def get_webhook_endpoint(
+    session: Session, *, club_id: int, endpoint_id: int
+) -> WebhookEndpoint | None:
+    return session.scalars(
+        select(WebhookEndpoint).where(
+            WebhookEndpoint.club_id == club_id, WebhookEndpoint.id == endpoint_id
+        )
+    ).first()
+
+
+def update_webhook_endpoint(
+    session: Session,
+    row: WebhookEndpoint,
+    *,
+    url: str | None,
+    events: list[str] | None,
+    description: str | None,
+    enabled: bool | None,
+    rotate: bool,
+) -> str | None:
+    """Apply an update (None: unchanged); returns the new secret when ``rotate``."""
+    if url is not None:
+        row.url = url
+    if events is not None:
+        row.events = events
+    if description is not None:
+        row.description = description
+    if enabled is not None and enabled == (row.disabled_at is not None):
+        row.disabled_at = None if enabled else utcnow()
+    new_secret = security.new_webhook_secret() if rotate else None
+    if new_secret:
+        row.secret = new_secret
+    session.commit()
+    return new_secret
+
+
+def delete_webhook_endpoint(session: Session, row: WebhookEndpoint) -> None:
+    session.delete(row)
+    session.commit()
+
+
+def webhook_targets(session: Session, *, club_id: int, event: str) -> list[tuple[str, str]]:
+    """(url, secret) of every receiver of ``event`` in the club: its default webhook (every
+    event) first, then its enabled endpoints that name the event."""
+    club = session.get(Club, club_id)
+    if club is None:
+        return []
+    targets: list[tuple[str, str]] = []
+    if club.webhook_url and club.webhook_secret:
+        targets.append((club.webhook_url, club.webhook_secret))
+    stmt = select(WebhookEndpoint).where(
+        WebhookEndpoint.club_id == club_id, WebhookEndpoint.disabled_at.is_(None)
+    )
+    # JSON containment differs per backend; a club has few endpoints, so filter here.
+    targets += [(e.url, e.secret) for e in session.scalars(stmt.order_by(WebhookEndpoint.id))
+                if event in e.events]  # fmt: skip
+    return targets
 
 
 # ---- API keys

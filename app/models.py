@@ -24,6 +24,8 @@ from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 ROLES = ("coach", "performer")
 ANALYSIS_STATES = ("queued", "running", "done", "failed", "cancelled")
 TERMINAL_STATES = ("done", "failed", "cancelled")
+#: What webhooks announce: an analysis reaching a final state.
+WEBHOOK_EVENTS = tuple(f"analysis.{state}" for state in TERMINAL_STATES)
 
 
 def utcnow() -> datetime:
@@ -65,6 +67,25 @@ class Club(Base):
     webhook_url: Mapped[str | None] = mapped_column(String(2000), default=None)
     webhook_secret: Mapped[str | None] = mapped_column(String(128), default=None)
     created_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
+
+
+class WebhookEndpoint(Base):
+    """A further receiver of the club's webhooks, for the events it names (the club's own
+    ``webhook_url`` is the default endpoint and receives every event)."""
+
+    __tablename__ = "webhook_endpoints"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    club_id: Mapped[int] = mapped_column(ForeignKey("clubs.id", ondelete="CASCADE"), index=True)
+    url: Mapped[str] = mapped_column(String(2000))
+    #: Signs this endpoint's deliveries; shown when made or rotated, kept to sign with.
+    secret: Mapped[str] = mapped_column(String(128))
+    #: Names from WEBHOOK_EVENTS this endpoint receives.
+    events: Mapped[list[str]] = mapped_column(JSON, default=list)
+    description: Mapped[str] = mapped_column(String(200), default="")
+    created_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
+    #: Set while deliveries to it are paused.
+    disabled_at: Mapped[datetime | None] = mapped_column(UTCDateTime(), default=None)
 
 
 class User(Base):

@@ -6,7 +6,7 @@ Every string has a length limit and every list a size limit: nothing unbounded c
 from __future__ import annotations
 
 from datetime import datetime
-from typing import Annotated, Any, Generic, Literal, TypeVar
+from typing import Annotated, Any, Generic, Literal, TypeVar, get_args
 
 from pydantic import (
     AnyHttpUrl,
@@ -22,12 +22,38 @@ from pydantic import (
 from app.core.validation import engine_domain
 from app.models import segment_names
 
+#: Neither "@" nor a space. ``\s`` differs between the server's regex engines and the
+#: document's (ECMA) on U+001C-U+001F, U+0085 and U+FEFF: naming them makes both agree.
+_NOT_AT_OR_SPACE = r"[^@\s\x1c-\x1f\x85\ufeff]"
 # A plausibility check only (no DNS, no email-validator dependency).
-EMAIL_PATTERN = r"^[^@\s]+@[^@\s]+\.[^@\s]+$"
+EMAIL_PATTERN = rf"^{_NOT_AT_OR_SPACE}+@{_NOT_AT_OR_SPACE}+\.{_NOT_AT_OR_SPACE}+$"
 
 AnalysisState = Literal["queued", "running", "done", "failed", "cancelled"]
 
 _HTTP_URL = TypeAdapter(AnyHttpUrl)
+
+#: The JSON schema of a webhook URL (its host's addresses are checked by the route).
+_WEBHOOK_URL_SCHEMA = {
+    "type": "string", "format": "uri", "maxLength": 2000,
+    "pattern": "^[hH][tT][tT][pP][sS]?://[^/?#]+",
+}  # fmt: skip
+
+#: ``app.models.WEBHOOK_EVENTS`` spelled out, so the OpenAPI document lists them.
+WebhookEvent = Literal["analysis.done", "analysis.failed", "analysis.cancelled"]
+
+
+def _http_url(v: str, *, removable: bool) -> str:
+    """An http(s) URL normalised (``HTTP://Example.COM`` -> ``http://example.com/``)."""
+    try:
+        return str(_HTTP_URL.validate_python(v))
+    except ValidationError:
+        remove = ', or "" to remove the webhook' if removable else ""
+        raise ValueError(f"must be an http or https URL{remove}") from None
+
+
+def _unique_events(events: list[WebhookEvent]) -> list[WebhookEvent]:
+    """``events`` without repeats, in the order of ``WEBHOOK_EVENTS``."""
+    return [e for e in get_args(WebhookEvent) if e in events]
 
 
 class _Orm(BaseModel):
@@ -71,31 +97,98 @@ class ClubUpdate(BaseModel):
         max_length=2000,
         description='An http or https URL on a public address, or "" to remove the webhook.',
         json_schema_extra={
-            "anyOf": [
-                {"type": "string", "format": "uri", "maxLength": 2000,
-                 "pattern": "^[hH][tT][tT][pP][sS]?://[^/?#]+"},
-                {"type": "string", "maxLength": 0},
-                {"type": "null"},
-            ]
-        },  # fmt: skip
+            "anyOf": [_WEBHOOK_URL_SCHEMA, {"type": "string", "maxLength": 0}, {"type": "null"}]
+        },
     )
     rotate_webhook_secret: bool = Field(default=False, strict=True)  # JSON true or false
 
     @field_validator("webhook_url")
     @classmethod
     def _http_url(cls, v: str | None) -> str | None:
-        """The URL normalised (``HTTP://Example.COM`` -> ``http://example.com/``)."""
-        if not v:
-            return v
-        try:
-            return str(_HTTP_URL.validate_python(v))
-        except ValidationError:
-            raise ValueError('must be an http or https URL, or "" to remove the webhook') from None
+        return _http_url(v, removable=True) if v else v
 
 
 class ClubUpdated(ClubPublic):
     #: Shown only when a new secret was generated (first webhook URL or rotation).
     webhook_secret: str | None = None
+
+
+# ---- webhook endpoints (more receivers than the club's default webhook_url)
+class WebhookEndpointCreate(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    url: str = Field(
+        max_length=2000,
+        description="An http or https URL on a public address.",
+        json_schema_extra=_WEBHOOK_URL_SCHEMA,
+    )
+    #: Repeats are dropped; the order is WEBHOOK_EVENTS'.
+    events: list[WebhookEvent] = Field(
+        default=list(get_args(WebhookEvent)),
+        min_length=1,
+        max_length=3,
+        description="The events this endpoint receives (default: all).",
+    )
+    description: str = Field(default="", max_length=200)
+
+    @field_validator("url")
+    @classmethod
+    def _url(cls, v: str) -> str:
+        return _http_url(v, removable=False)
+
+    @field_validator("events")
+    @classmethod
+    def _events(cls, v: list[WebhookEvent]) -> list[WebhookEvent]:
+        return _unique_events(v)
+
+
+class WebhookEndpointUpdate(BaseModel):
+    """Fields left out (or null) stay as they are."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    url: str | None = Field(
+        default=None,
+        max_length=2000,
+        description="An http or https URL on a public address.",
+        json_schema_extra={"anyOf": [_WEBHOOK_URL_SCHEMA, {"type": "null"}]},
+    )
+    events: list[WebhookEvent] | None = Field(default=None, min_length=1, max_length=3)
+    description: str | None = Field(default=None, max_length=200)
+    #: A new signing secret, shown once in the answer; the old one stops signing at once.
+    rotate_secret: bool = Field(default=False, strict=True)
+    #: false pauses deliveries to this endpoint, true resumes them.
+    enabled: bool | None = Field(default=None, strict=True)
+
+    @field_validator("url")
+    @classmethod
+    def _url(cls, v: str | None) -> str | None:
+        return v if v is None else _http_url(v, removable=False)
+
+    @field_validator("events")
+    @classmethod
+    def _events(cls, v: list[WebhookEvent] | None) -> list[WebhookEvent] | None:
+        return v if v is None else _unique_events(v)
+
+
+class WebhookEndpointPublic(_Orm):
+    id: int
+    url: str
+    events: list[WebhookEvent]
+    description: str
+    created_at: datetime
+    #: Set while deliveries to it are paused.
+    disabled_at: datetime | None
+
+
+class WebhookEndpointCreated(WebhookEndpointPublic):
+    #: The signing secret; shown once, never again.
+    secret: str
+
+
+class WebhookEndpointUpdated(WebhookEndpointPublic):
+    #: The new signing secret when ``rotate_secret`` was true (shown once), else null.
+    secret: str | None = None
 
 
 # ---- API keys
@@ -297,6 +390,10 @@ class JoinedPublic(BaseModel):
 
 
 class ApiKeysPublic(ListPage[ApiKeyPublic]):
+    pass
+
+
+class WebhookEndpointsPublic(ListPage[WebhookEndpointPublic]):
     pass
 
 

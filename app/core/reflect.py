@@ -87,7 +87,9 @@ def reflect(session: Session, analysis: Analysis, *, on_final: OnFinal | None = 
 
 
 class Notifier:
-    """Sends completion webhooks from background threads, retrying with backoff (bounded).
+    """Sends completion webhooks from background threads, retrying with backoff (bounded):
+    one delivery per receiver (the club's default ``webhook_url`` and each enabled
+    ``WebhookEndpoint`` subscribed to the event).
 
     Each delivery is checked and pinned to a public address (:mod:`app.core.webhooks`) before
     every attempt, signed with a fresh timestamp, and carries one delivery id for all its
@@ -101,28 +103,31 @@ class Notifier:
         self._lock = threading.Lock()
 
     def __call__(self, analysis: Analysis) -> None:
+        """Send the analysis' final state to every receiver of its event: the club's default
+        webhook and its endpoints subscribed to the event, each with its own secret and
+        delivery id."""
         if analysis.status not in TERMINAL_STATES:  # done, failed, cancelled
             return
+        event = f"analysis.{analysis.status}"
         with self.session_factory() as session:
-            club = crud.get_club(session, analysis.club_id)
-            if club is None or not club.webhook_url or not club.webhook_secret:
-                return
-            url, secret = club.webhook_url, club.webhook_secret
-        delivery_id = str(uuid.uuid4())
-        body = json.dumps(
-            {
-                "delivery_id": delivery_id,
-                "event": f"analysis.{analysis.status}",
-                "analysis": AnalysisPublic.model_validate(analysis).model_dump(mode="json"),
-            },
-            separators=(",", ":"),
-        ).encode()
-        thread = threading.Thread(
-            target=self.deliver, args=(url, secret, body, analysis.id, delivery_id), daemon=True
-        )
-        with self._lock:
-            self._threads = [t for t in self._threads if t.is_alive()] + [thread]
-        thread.start()
+            targets = crud.webhook_targets(session, club_id=analysis.club_id, event=event)
+        if not targets:
+            return
+        public = AnalysisPublic.model_validate(analysis).model_dump(mode="json")
+        for url, secret in targets:
+            delivery_id = str(uuid.uuid4())
+            body = json.dumps(
+                {"delivery_id": delivery_id, "event": event, "analysis": public},
+                separators=(",", ":"),
+            ).encode()
+            thread = threading.Thread(
+                target=self.deliver,
+                args=(url, secret, body, analysis.id, delivery_id),
+                daemon=True,
+            )
+            with self._lock:
+                self._threads = [t for t in self._threads if t.is_alive()] + [thread]
+            thread.start()
 
     def deliver(
         self, url: str, secret: str, body: bytes, analysis_id: str, delivery_id: str

@@ -12,12 +12,14 @@ from app.api.routes import (
     performers,
     references,
     session,
+    webhooks,
 )
 
 api_router = APIRouter()
 api_router.include_router(health.router)
 api_router.include_router(club.router)
 api_router.include_router(keys.router)
+api_router.include_router(webhooks.router)
 api_router.include_router(performers.router)
 api_router.include_router(references.router)
 api_router.include_router(analyses.router)

@@ -32,7 +32,9 @@ def read_club(club: CoachClub) -> ClubPublic:
         "timestamps more than 5 minutes from its clock and drops delivery ids it has seen "
         "(`app.core.security.verify_webhook` does the first two). Redirects are not "
         "followed; a 2xx answer ends the delivery, 5xx, 408, 429 and network errors are "
-        "retried with backoff."
+        "retried with backoff.\n\n"
+        "This URL is the club's default endpoint and receives every event; more endpoints, "
+        "each with its own secret and the events it wants, live at `/api/v1/webhooks`."
     ),
     responses=errors(422),
 )
