@@ -44,7 +44,9 @@ def contact_sheet(video: Path, result: dict, out: Path, n: int = 8) -> None:
         frames.append(f)
     cap.release()
     by_t = {f["t"]: f for f in result["frames"]}
-    picks = np.linspace(0, len(frames) - 1, n).round().astype(int)
+    # over the analysed frames: the whole video, or the repetition analysed of several
+    ts = sorted(by_t)
+    picks = np.linspace(ts[0], min(ts[-1], len(frames) - 1), n).round().astype(int)
     tiles = []
     for t in picks:
         img = frames[t].copy()

@@ -32,7 +32,13 @@ from engine.render.camera import Camera
 from engine.settings import Settings
 from engine.stage_outputs import AnalysedVideo, CandidateChunk, Prepared, Stages02
 from engine.stages.alignment import AlignmentResult, align
-from engine.stages.assessment import add_image_best, add_uncertainty, assess_fit, flag_image_misfit
+from engine.stages.assessment import (
+    add_image_best,
+    add_uncertainty,
+    assess_fit,
+    flag_image_misfit,
+    note_repetitions,
+)
 from engine.stages.calibration import (
     CalibrationSettings,
     calibrate,
@@ -94,15 +100,19 @@ def prepare(
         No person, no usable camera or body region.
     """
     s = settings or Settings()
+    if frames is not None:  # the user chose the frames: no search for performances
+        s = dataclasses.replace(s, alignment=dataclasses.replace(s.alignment, repetitions=False))
     t0 = time.perf_counter()
     reference = load_reference(reference_path, mapping=mapping, units_to_m=units_to_m)
     video, offset = _read_frames(video_path, s, frames)
+    file_frames = int(video.n_frames) if frames is None else int(frames[1] - frames[0])
     segments = reference_segments(reference.motion, domain)  # thesis 2.1.1 item 4, 6.8
     load_s = time.perf_counter() - t0
     t0 = time.perf_counter()
     perception = _perceive(video, s, on_progress)
     perceive_s = time.perf_counter() - t0
     r = run_stages_0_2(reference, video, s, perception=perception, on_progress=on_progress)
+    perception, offset = r.perception, offset + r.first_frame
     h, w = video.frames.shape[1:3]
     return Prepared(
         reference_path=str(reference_path), video_path=str(video_path),
@@ -110,9 +120,10 @@ def prepare(
         reference_fps=float(reference.motion.fps),
         first_motion_frame=int(reference.motion.first_motion_frame),
         reference_joints=reference.motion.joints, shape=r.shape,
-        video=AnalysedVideo(frames=int(video.n_frames), fps=float(video.fps), width=int(w),
+        video=AnalysedVideo(frames=r.foreground.n_frames, fps=float(video.fps), width=int(w),
                             height=int(h), original_width=int(video.original_width),
-                            original_height=int(video.original_height), offset=offset),
+                            original_height=int(video.original_height), offset=offset,
+                            file_frames=file_frames + offset - r.first_frame),
         camera=r.camera, silhouettes=r.foreground.silhouettes, edges=r.foreground.edges,
         C=np.asarray(r.alignment.C, dtype=int),
         rotations=np.asarray(r.alignment.rotations, float), segments=segments, domain=domain,
@@ -123,6 +134,11 @@ def prepare(
         keypoint_confidence=None if perception is None else perception.confidence,
         keypoint_offsets=None if perception is None else r.keypoint_offsets,
         perception_model="" if perception is None else perception.model,
+        repetitions=tuple(
+            {**p, "start": p["start"] + offset - r.first_frame,
+             "end": p["end"] + offset - r.first_frame}
+            for p in r.repetitions
+        ),
     )  # fmt: skip
 
 
@@ -199,8 +215,9 @@ def select(
         reference_name=prepared.reference_name,
         reference_frames=int(prepared.reference_joints.shape[0]),
         reference_fps=prepared.reference_fps,
-        video={"frames": v.frames, "fps": v.fps, "width": v.original_width,
-               "height": v.original_height},
+        video={"frames": v.file_frames or v.offset + v.frames, "fps": v.fps,
+               "width": v.original_width, "height": v.original_height,
+               "first_frame": v.offset},
         camera=camera, selection=selection, candidates=cands, timing_s=timing,
         domain=prepared.domain, video_frame_offset=v.offset,
     )  # fmt: skip
@@ -209,6 +226,7 @@ def select(
                     sel_settings.uncertainty_margin)  # fmt: skip
     chosen = np.stack([c[int(k)] for c, k in zip(cands, selection.selected, strict=True)])
     assess_fit(doc, chosen, prepared, sel_settings)
+    note_repetitions(doc, prepared.repetitions)
     return doc
 
 
@@ -254,7 +272,10 @@ def run_stages_0_2(
     view facing the other way, and the one with the lower mean cost E_C is kept (one frame
     hardly tells front from back; the whole motion does). The camera is then polished on
     frames spread over the video and, with ``alignment.realign``, stage 2 runs once more
-    with it and the performer's fitted body.
+    with it and the performer's fitted body. With ``alignment.repetitions``, a video whose
+    keypoints show several whole performances is cut to the first after stage 1 (the camera
+    is the whole video's): stage 2 and everything after it see that one only
+    (:attr:`Stages02.first_frame`, :attr:`Stages02.repetitions`).
 
     Raises
     ------
@@ -277,6 +298,12 @@ def run_stages_0_2(
     t0 = time.perf_counter()
     cameras = _calibrate_views(joints[c0], reference.shape, fg, s, perception, on_progress)
     timing["calibration"] = time.perf_counter() - t0
+    first, found = 0, ()  # type: tuple[int, tuple[dict, ...]]
+    if s.alignment.repetitions and perception is not None:
+        first, found = _first_performance(reference, cameras[0], perception, video.fps)
+        if found:  # stage 2 and after see the first performance only
+            end = int(found[0]["end"])
+            fg, perception = fg.cut(first, end), perception.cut(first, end)
     views = _Views(perception, joints[c0], cal.offset_frames, s.alignment.keypoint_offsets)
     t0 = time.perf_counter()
     passes = len(cameras) + int(s.alignment.realign and cal.refine_frames > 0)
@@ -305,7 +332,23 @@ def run_stages_0_2(
                        on_progress=_share(on_progress, passes - 1, passes))  # fmt: skip
         timing["alignment"] += time.perf_counter() - t0
     costs = {round(float(np.degrees(r[2].azimuth)), 6): float(r[0]) for r in results}
-    return Stages02(fg, camera, shape, factors, result, timing, costs, views.offsets(camera))
+    return Stages02(fg, camera, shape, factors, result, timing, costs, views.offsets(camera),
+                    first, found, perception)  # fmt: skip
+
+
+def _first_performance(
+    reference: Reference, camera: Camera, perception: Perception, fps: float
+) -> tuple[int, tuple[dict, ...]]:
+    """Where the first of several whole performances starts, and all of them
+    (``AlignmentSettings.repetitions``); (0, ()) when the video holds one or none."""
+    from engine.stages.repetitions import performances
+
+    motion = reference.motion
+    ref_2d = camera.project(motion.joints[motion.first_motion_frame :])
+    found = performances(perception.keypoints, ref_2d, fps, float(motion.fps))
+    if not found.found:
+        return 0, ()
+    return found.found[0].start, tuple(found.to_dicts(fps, analysed=0))
 
 
 def _read_frames(

@@ -22,6 +22,7 @@ from engine.reference.domain import Domain, parse_domain
 from engine.render.camera import Camera
 from engine.stages.alignment import AlignmentResult
 from engine.stages.foreground import ForegroundResult
+from engine.stages.perception import Perception
 from engine.types import Segments
 
 PathLike = str | os.PathLike
@@ -54,6 +55,15 @@ class Stages02:
     keypoint_offsets : ndarray, shape (17, 2)
         The pose model's offset from each joint in pixels, measured on the first frames
         (:func:`engine.stages.perception.keypoint_offsets`); zeros without perception.
+    first_frame : int
+        The video frame the analysed part starts at: 0, or the first whole performance's
+        first frame when the video holds several (``AlignmentSettings.repetitions``);
+        ``foreground`` and ``perception`` hold the analysed frames only.
+    repetitions : tuple of dict
+        Every whole performance found (``summary.repetitions`` of the result: frames of
+        the video given, seconds, which one is analysed); empty when the video holds one.
+    perception : Perception or None
+        The pose model's output over the analysed frames.
     """
 
     foreground: ForegroundResult
@@ -64,13 +74,18 @@ class Stages02:
     timing_s: dict
     view_costs: dict = field(default_factory=dict)
     keypoint_offsets: np.ndarray = field(default_factory=lambda: np.zeros((17, 2)))
+    first_frame: int = 0
+    repetitions: tuple[dict, ...] = ()
+    perception: Perception | None = None
 
 
 @dataclass(frozen=True)
 class AnalysedVideo:
     """The analysed video: frame count and rate, working and file resolution.
 
-    ``offset`` is the file frame the analysis starts at (``coach analyze --frames A:B``).
+    ``offset`` is the file frame the analysis starts at (``coach analyze --frames A:B``, or
+    the first whole performance of several, :class:`Stages02`); ``file_frames`` is how many
+    frames the file holds (0 when not recorded: as many as ``frames``).
     """
 
     frames: int
@@ -80,6 +95,7 @@ class AnalysedVideo:
     original_width: int
     original_height: int
     offset: int = 0
+    file_frames: int = 0
 
 
 @dataclass(frozen=True)
@@ -120,6 +136,9 @@ class Prepared:
         The pose model's offset from each joint (working pixels), removed from its readings.
     perception_model : str
         Name and version of the pose model ("" when none ran).
+    repetitions : tuple of dict
+        Whole performances of the reference the video holds when several
+        (:attr:`Stages02.repetitions`), in the file's frames; empty otherwise.
     """
 
     reference_path: str
@@ -143,6 +162,7 @@ class Prepared:
     keypoint_confidence: np.ndarray | None = None
     keypoint_offsets: np.ndarray | None = None
     perception_model: str = ""
+    repetitions: tuple[dict, ...] = ()
 
     @property
     def n_frames(self) -> int:
@@ -206,6 +226,7 @@ class Prepared:
             "domain": None if self.domain is None else self.domain.doc,
             "flags": [list(f) for f in self.flags], "timing_s": self.timing_s,
             "perception_model": self.perception_model,
+            "repetitions": [dict(r) for r in self.repetitions],
         }  # fmt: skip
         save_arrays(path, arrays, meta)
 
@@ -230,6 +251,7 @@ class Prepared:
             keypoints=a.get("keypoints"), keypoint_confidence=a.get("keypoint_confidence"),
             keypoint_offsets=a.get("keypoint_offsets"),
             perception_model=str(m.get("perception_model", "")),
+            repetitions=tuple(m.get("repetitions", ())),
         )  # fmt: skip
 
 

@@ -109,7 +109,9 @@ def run(args: argparse.Namespace) -> int:
         for m in summary.messages:
             print(f"  {m}")
     if args.report:
-        a, b = frames or (0, n)
+        # the analysed frames: those asked for, or the first of several repetitions
+        a = result.video.first_frame
+        b = a + len(result.frames)
         video = read_video(args.video, height=result.video.height, max_frames=b)
         write_text(build_report_html(result, video.frames[a:b]), args.report)
         if not args.quiet:

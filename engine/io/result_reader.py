@@ -57,6 +57,9 @@ class ResultVideo:
     width: int
     """Pixels, the video file's own (``joints_2d`` are in these)."""
     height: int
+    first_frame: int = 0
+    """The first analysed frame (``frames[0].t``): a range the user chose, or the first of
+    several repetitions (``summary.repetitions``)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -306,6 +309,7 @@ def _video(v: Any, where: str) -> ResultVideo:
         fps=_num(_req(m, "fps", where), f"{where}/fps"),
         width=_int(_req(m, "width", where), f"{where}/width"),
         height=_int(_req(m, "height", where), f"{where}/height"),
+        first_frame=_int(m.get("first_frame", 0), f"{where}/first_frame"),
     )
 
 

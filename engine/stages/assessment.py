@@ -7,6 +7,7 @@ thesis' stage 4 (4.7) has chosen one candidate per frame; all of it is beyond th
     add_image_best      in those frames, the candidate that explains the video best
     add_uncertainty     each bone error's range over the candidates the video cannot tell apart
     assess_fit          ``poor_fit`` when the reported motion does not explain the video
+    note_repetitions    which of several whole performances the result covers
 """
 
 from __future__ import annotations
@@ -130,7 +131,7 @@ def assess_fit(
         summary["fit"]["keypoint_off_frames"] = int(off.sum())
         if message is None and off.mean() > settings.poor_fit_frames:
             reps = _repetitions(prepared)
-            message = _apart_message(float(off.mean()), reps)
+            message = _apart_message(float(off.mean()), reps, cut=bool(prepared.repetitions))
             if reps:
                 summary["repetitions"] = reps
     if message is not None:
@@ -138,12 +139,34 @@ def assess_fit(
         summary["messages"] = [message, *summary["messages"]]
 
 
+def note_repetitions(doc: dict, repetitions: Sequence[dict]) -> None:
+    """Say which of several whole performances the result covers (beyond the thesis).
+
+    ``repetitions`` are :attr:`Prepared.repetitions` (file frames, seconds, ``analysed``);
+    they go to ``summary.repetitions`` and a message names them, so the performer knows
+    the rest of the video was left out on purpose and which frames the numbers are about.
+    """
+    if not repetitions:
+        return
+    summary = doc["summary"]
+    summary["repetitions"] = [dict(r) for r in repetitions]
+    spans = ", ".join(f"{_clock(r['start_s'])}-{_clock(r['end_s'])}" for r in repetitions)
+    chosen = next((r for r in repetitions if r.get("analysed")), repetitions[0])
+    summary["messages"] = [
+        f"The video holds {len(repetitions)} whole repetitions of the reference's motion "
+        f"({spans}). This analysis covers the first one, {_clock(chosen['start_s'])}-"
+        f"{_clock(chosen['end_s'])}; the rest of the video is not analysed.",
+        *summary["messages"],
+    ]
+
+
 def _repetitions(prepared: Prepared) -> list[dict]:
     """The repetitions of the reference's motion the keypoints show, when more than one
-    (:func:`engine.stages.repetitions.excursions`): video frames and seconds."""
+    (:func:`engine.stages.repetitions.excursions`): video frames and seconds; none when the
+    analysis already covers one of several (:func:`note_repetitions` names them)."""
     from engine.stages.repetitions import excursions
 
-    if prepared.keypoints is None:
+    if prepared.keypoints is None or prepared.repetitions:
         return []
     start = prepared.camera.project(prepared.reference_joints[prepared.first_motion_frame][None])
     fps = prepared.video.fps
@@ -157,9 +180,16 @@ def _repetitions(prepared: Prepared) -> list[dict]:
     ]  # fmt: skip
 
 
-def _apart_message(share: float, repetitions: list[dict]) -> str:
-    """What to do when the reported motion leaves the body in ``share`` of the frames."""
+def _apart_message(share: float, repetitions: list[dict], *, cut: bool = False) -> str:
+    """What to do when the reported motion leaves the body in ``share`` of the frames
+    (``cut``: of the one repetition analysed out of several)."""
     said = f"Your body and the expert's motion part ways in {100 * share:.0f} % of the frames"
+    if cut:
+        return (
+            f"{said} of the repetition analysed: your motion differs from the reference's "
+            "more than the fit can follow (another motion, or a much shallower or deeper "
+            "one), so read the numbers with care."
+        )
     if repetitions:
         spans = ", ".join(f"{_clock(r['start_s'])}-{_clock(r['end_s'])}" for r in repetitions)
         return (

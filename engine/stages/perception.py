@@ -127,6 +127,12 @@ class Perception:
             np.asarray(a["perception_detected"]), str(a["perception_model"]),
         )  # fmt: skip
 
+    def cut(self, start: int, end: int) -> Perception:
+        """Frames ``start``..``end - 1`` only."""
+        sl = slice(start, end)
+        return Perception(self.mask[sl], self.keypoints[sl], self.confidence[sl],
+                          self.facing[sl], self.detected[sl], self.model)  # fmt: skip
+
     def scaled(self, factor: float) -> Perception:
         """Keypoints in an image scaled by ``factor`` (the mask is left as it is)."""
         return Perception(self.mask, self.keypoints * factor, self.confidence, self.facing,

@@ -23,9 +23,14 @@ relative to each frame's best posture), it split 65 frames of four shallow squat
 "repetitions" (the reference is one deep squat, and at 5 fps a descent takes one or two
 frames), so it is not wired in. See docs/perception.md, "Repetitions".
 
-:func:`excursions` is the cheaper cue that is wired in: where the reported motion leaves the
-body (``poor_fit``), :func:`engine.stages.assessment.assess_fit` names the whole repetitions
-it finds, so the performer knows where to trim.
+:func:`excursions` is the cheaper cue that is wired in, in two places:
+
+- :func:`performances` groups the excursions as the reference's own (seen through the
+  calibrated camera) and widens each by the reference's rest before and after it; when the
+  video holds two or more, :func:`engine.pipeline.run_stages_0_2` analyses the first and the
+  result lists them all (``summary.repetitions``);
+- where the reported motion leaves the body of a video that was not cut (``poor_fit``),
+  :func:`engine.stages.assessment.assess_fit` names the whole repetitions it finds.
 """
 
 from __future__ import annotations
@@ -232,3 +237,100 @@ def excursions(
     # (re-racking a bar, a step to the side)
     typical = float(np.median([r.end - r.start for r in out])) if out else 0.0
     return [r for r in out if r.end - r.start >= 0.5 * typical]
+
+
+@dataclass(frozen=True)
+class Performances:
+    """The whole performances of the reference a video holds (:func:`performances`).
+
+    Attributes
+    ----------
+    found : tuple of Repetition
+        Each performance as video frames ``start``..``end`` (exclusive), with the rest
+        before and after it that the reference itself holds; in video order.
+    per_performance : int
+        Excursions from the starting posture one performance makes (the reference's own
+        count: one for a squat).
+    """
+
+    found: tuple[Repetition, ...]
+    per_performance: int
+
+    def to_dicts(self, fps: float, analysed: int | None, offset: int = 0) -> list[dict]:
+        """``summary.repetitions`` of the result: file frames, seconds, which one is analysed."""
+        return [
+            {"start": r.start + offset, "end": r.end + offset,
+             "start_s": round((r.start + offset) / fps, 2),
+             "end_s": round((r.end + offset) / fps, 2), "analysed": i == analysed}
+            for i, r in enumerate(self.found)
+        ]  # fmt: skip
+
+
+def performances(
+    keypoints: np.ndarray,
+    reference_2d: np.ndarray,
+    fps: float,
+    reference_fps: float,
+    *,
+    min_s: float = 0.4,
+) -> Performances:
+    """Every whole performance of the reference in the video, when it holds several.
+
+    Beyond the thesis (whose stage 2 matches one performance to the whole video). The
+    reference tells what one performance looks like in the keypoints' own terms: seen
+    through the calibrated camera, it leaves its first posture and comes back ``m`` times
+    (:func:`excursions`; once for a squat), after a lead-in and before a tail at rest. The
+    video's excursions, taken ``m`` at a time, are its performances; each is widened by the
+    reference's lead-in and tail at the performance's own pace (video excursion time over
+    the reference's), up to halfway to its neighbours, so stage 2's pinned ends (C(0) = the
+    first reference frame, C(L') = the last) hold on each of them.
+
+    Parameters
+    ----------
+    keypoints : ndarray, shape (T', 17, 2)
+        The pose model's keypoints; NaN where none.
+    reference_2d : ndarray, shape (T, 17, 2)
+        The reference's motion (from its first motion frame) projected by the calibrated
+        camera.
+    fps, reference_fps : float
+    min_s : float
+        Shortest excursion kept, seconds (of the video and of the reference).
+
+    Returns
+    -------
+    Performances
+        ``found`` is empty unless the video holds at least two whole performances (one
+        performance is what stage 2 already assumes).
+
+    Raises
+    ------
+    InvalidInput
+        Shapes that do not match or a non-positive rate.
+    """
+    kp, ref = np.asarray(keypoints, float), np.asarray(reference_2d, float)
+    if kp.ndim != 3 or kp.shape[1:] != (17, 2) or ref.ndim != 3 or ref.shape[1:] != (17, 2):
+        raise InvalidInput(
+            f"keypoints and reference_2d must be (T, 17, 2), got {kp.shape} and {ref.shape}"
+        )
+    if not (fps > 0 and reference_fps > 0):
+        raise InvalidInput(f"fps and reference_fps must be > 0, got {fps} and {reference_fps}")
+    own = excursions(ref, ref[0], reference_fps, min_s=min_s)
+    if not own:
+        return Performances((), 0)
+    m = len(own)
+    seen = excursions(kp, ref[0], fps, min_s=min_s)
+    groups = [seen[i : i + m] for i in range(0, len(seen) - m + 1, m)]
+    if len(groups) < 2:
+        return Performances((), m)
+    ref_moving = (own[-1].end - own[0].start) / reference_fps
+    lead, tail = own[0].start / reference_fps, (len(ref) - own[-1].end) / reference_fps
+    spans = [(g[0].start, g[-1].end, float(np.mean([r.mean_cost for r in g]))) for g in groups]
+    found = []
+    for i, (start, end, cost) in enumerate(spans):
+        pace = (end - start) / fps / max(ref_moving, 1e-9)  # video seconds per reference second
+        lo = 0 if i == 0 else (spans[i - 1][1] + start) // 2
+        hi = len(kp) if i == len(spans) - 1 else (end + spans[i + 1][0] + 1) // 2
+        a = max(lo, int(round(start - lead * pace * fps)))
+        b = min(hi, int(round(end + tail * pace * fps)))
+        found.append(Repetition(a, b, cost))
+    return Performances(tuple(found), m)

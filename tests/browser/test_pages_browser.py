@@ -316,3 +316,42 @@ def test_phone_layout_upload_page(server, browser, shots):
     assert width <= 390, f"horizontal scroll on a phone: {width}px"
     page.screenshot(path=str(shots / "upload-phone.png"), full_page=True)
     ctx.close()
+
+
+def test_one_repetition_of_several_is_shown_where_it_is_in_the_video(server, browser, clip,
+                                                                     clip_result, shots):
+    """A result that covers file frames 4..11 of the clip (the first of two repetitions):
+    the page lists the repetitions, numbers frames as the file does, and draws no skeleton
+    where nothing was analysed."""
+    result = json.loads(json.dumps(clip_result))
+    result["frames"] = result["frames"][4:]
+    result["video"]["first_frame"] = 4
+    for seg in result["segments"]:
+        seg["performer_start"] = max(seg["performer_start"], 4)
+        seg["performer_end"] = max(seg["performer_end"], seg["performer_start"])
+    fps = result["video"]["fps"]
+    result["summary"]["repetitions"] = [
+        {"start": 4, "end": 12, "start_s": round(4 / fps, 2), "end_s": round(12 / fps, 2),
+         "analysed": True},
+        {"start": 12, "end": 20, "start_s": round(12 / fps, 2), "end_s": round(20 / fps, 2),
+         "analysed": False},
+    ]  # fmt: skip
+    aid = server.add_done_analysis("pat", clip, result)
+    page = browser.new_context(viewport={"width": 1280, "height": 1000}).new_page()
+    sign_in(page, server.url, "pat@example.com", next_path=f"/analyses/{aid}")
+    wait_results(page)
+    reps = page.locator("#repetition-list li")
+    assert page.locator("#repetitions").is_visible() and reps.count() == 2
+    assert reps.first.inner_text().endswith("(analysed)")
+    assert "(analysed)" not in reps.last.inner_text()
+    go_to_frame(page, 0)  # the first analysed frame is the file's frame 4
+    assert page.locator("#frame-label").inner_text().startswith("frame 4 / 11")
+    assert sum(canvas_colours(page, "#overlay")) > 0
+    # before the analysed part: the video plays on, without a skeleton
+    page.evaluate("() => { const v = document.getElementById('video'); v.currentTime = 1.5 / "
+                  f"{fps}; }}")  # fmt: skip
+    page.wait_for_function("() => document.getElementById('frame-label').textContent"
+                           ".includes('not analysed')")  # fmt: skip
+    assert page.locator("#frame-label").inner_text().startswith("frame 1 /")
+    assert canvas_colours(page, "#overlay") == (0, 0)
+    page.screenshot(path=str(shots / "repetitions.png"), full_page=True)

@@ -116,14 +116,18 @@
   // ---------------------------------------------------------------- results
   const video = $("video"), overlay = $("overlay");
   let result = null, summary = null, frame = 0, fps = 30, n = 0, plot = null, viewerReady = false;
+  // The analysed frames may be one repetition of several: result frame i is file frame
+  // first + i, and the video outside them is shown without a skeleton.
+  let first = 0, outside = false;
 
   async function loadResults() {
     $("results").hidden = false;
     [result, summary] = await Promise.all([coach.api(base + "/result"), coach.api(base + "/summary")]);
-    fps = result.video.fps; n = result.frames.length;
+    fps = result.video.fps; n = result.frames.length; first = result.frames[0].t;
     overlay.width = result.video.width; overlay.height = result.video.height;
     video.src = base + "/video.mp4";
     showMessages((result.summary && result.summary.messages) || []);
+    showRepetitions((result.summary && result.summary.repetitions) || []);
     const anyBest = result.frames.some(function (f) { return f.image_best_joints_2d; });
     $("legend-image-best").hidden = !anyBest;
     $("legend3d-image-best").hidden = !anyBest;
@@ -141,17 +145,34 @@
     box.hidden = messages.length === 0;
   }
 
-  function frameAtTime(t) { return Math.max(0, Math.min(n - 1, Math.floor(t * fps + 1e-3))); }
+  // The repetitions the video holds when more than one; the analysed one is marked, the
+  // others can be watched (without a skeleton: they are not analysed).
+  function showRepetitions(reps) {
+    const box = $("repetitions");
+    box.hidden = reps.length === 0;
+    $("repetition-list").replaceChildren(...reps.map(function (r, i) {
+      const text = "Repetition " + (i + 1) + ": " + r.start_s.toFixed(1) + "–" + r.end_s.toFixed(1) + " s" + (r.analysed ? " (analysed)" : "");
+      return coach.el("li", {}, [coach.el("button", { type: "button", class: "link" + (r.analysed ? " current" : ""), text: text,
+        onclick: function () { video.pause(); if (video.readyState > 0) video.currentTime = (r.start + 0.5) / fps; } })]);
+    }));
+  }
+  function frameAtTime(t) {
+    const raw = Math.floor(t * fps + 1e-3);
+    outside = raw < first || raw > first + n - 1;
+    return Math.max(0, Math.min(n - 1, raw - first));
+  }
   function seek(f) {
     f = Math.max(0, Math.min(n - 1, f));
-    if (video.readyState > 0) video.currentTime = (f + 0.5) / fps;
+    outside = false;
+    if (video.readyState > 0) video.currentTime = (f + first + 0.5) / fps;
     setFrame(f, true);
   }
   function setFrame(f, force) {
-    if (f === frame && !force) return;
+    if (f === frame && !force && !outside) return;
     frame = f;
     root.dataset.frame = String(f);
-    $("frame-label").textContent = "frame " + f + " / " + (n - 1) + " · " + (f / fps).toFixed(2) + " s";
+    const shown = outside ? Math.floor(video.currentTime * fps + 1e-3) : f + first;
+    $("frame-label").textContent = "frame " + shown + " / " + (first + n - 1) + " · " + (shown / fps).toFixed(2) + " s" + (outside ? " · not analysed" : "");
     drawOverlay(); moveCursor(); markSegment(); sync3d();
   }
   function tick() {
@@ -171,7 +192,7 @@
   function drawOverlay() {
     const ctx = overlay.getContext("2d");
     ctx.clearRect(0, 0, overlay.width, overlay.height);
-    if (!result || !$("show-skeleton").checked) return;
+    if (!result || !$("show-skeleton").checked || outside) return;
     const fr = result.frames[frame];
     const p = fr.joints_2d, e = fr.bone_errors_deg;
     const w = Math.max(2, overlay.height / 80);
@@ -232,8 +253,9 @@
     const y = function (v) { return T + (H - T - B) * (1 - v / top); };
     const s = svg("svg", { viewBox: "0 0 " + W + " " + H, preserveAspectRatio: "none", id: "plot-svg" });
     (summary.segments || []).forEach(function (seg, i) {
-      s.append(svg("rect", { x: x(seg.performer_start), y: T, width: Math.max(x(seg.performer_end) - x(seg.performer_start), 1), height: H - T - B, fill: i % 2 ? "#eef2fb" : "#f8f9fc" }));
-      const t = svg("text", { x: x(seg.performer_start) + 4, y: T + 12, "font-size": 11, fill: "#5c6675" });
+      const a = seg.performer_start - first, b = seg.performer_end - first;
+      s.append(svg("rect", { x: x(a), y: T, width: Math.max(x(b) - x(a), 1), height: H - T - B, fill: i % 2 ? "#eef2fb" : "#f8f9fc" }));
+      const t = svg("text", { x: x(a) + 4, y: T + 12, "font-size": 11, fill: "#5c6675" });
       t.textContent = seg.name; s.append(t);
     });
     // Frames the video does not confirm (flag image_misfit): their errors may be too small.
@@ -264,8 +286,8 @@
     line(result.frames.map(function (f) { return f.posture_error_deg; }), "#c92a2a", 3, "posture error");
     const cursor = svg("line", { id: "plot-cursor", y1: T, y2: H - B, stroke: "#111", "stroke-width": 2, "vector-effect": "non-scaling-stroke" });
     s.append(cursor);
-    const lt = svg("text", { x: L, y: H - 6, "font-size": 11, fill: "#5c6675" }); lt.textContent = "frame 0"; s.append(lt);
-    const rt = svg("text", { x: W - R - 70, y: H - 6, "font-size": 11, fill: "#5c6675" }); rt.textContent = "frame " + (n - 1); s.append(rt);
+    const lt = svg("text", { x: L, y: H - 6, "font-size": 11, fill: "#5c6675" }); lt.textContent = "frame " + first; s.append(lt);
+    const rt = svg("text", { x: W - R - 70, y: H - 6, "font-size": 11, fill: "#5c6675" }); rt.textContent = "frame " + (first + n - 1); s.append(rt);
     // Legend.
     let lx = L + 200;
     const items = [["posture error", "#c92a2a"]].concat(bones.map(function (b, k) { return [BONES[b], PALETTE[k % PALETTE.length]]; }));
@@ -337,7 +359,7 @@
       const firstMisfit = misfit ? result.frames.findIndex(function (f) {
         return f.t >= s.performer_start && f.t <= s.performer_end && (f.flags || []).indexOf("image_misfit") >= 0;
       }) : -1;
-      card.addEventListener("click", function () { video.pause(); seek(firstMisfit >= 0 ? firstMisfit : s.performer_start); });
+      card.addEventListener("click", function () { video.pause(); seek(firstMisfit >= 0 ? firstMisfit : s.performer_start - first); });
       box.append(card);
     });
     const pin = $("comment-pin");
@@ -362,7 +384,7 @@
     if (!summary) return;
     document.querySelectorAll(".seg-card").forEach(function (c) {
       const s = summary.segments[+c.dataset.index];
-      c.classList.toggle("current", frame >= s.performer_start && frame <= s.performer_end);
+      c.classList.toggle("current", frame + first >= s.performer_start && frame + first <= s.performer_end);
     });
   }
 
@@ -374,8 +396,8 @@
     if (!items.length) ul.append(coach.el("li", { class: "muted", text: "No comments yet." }));
     items.forEach(function (c) {
       let pin;
-      if (c.frame != null) pin = coach.el("button", { type: "button", class: "link pin", text: "frame " + c.frame, onclick: function () { video.pause(); seek(c.frame); } });
-      else if (c.segment != null && summary.segments[c.segment]) pin = coach.el("button", { type: "button", class: "link pin", text: summary.segments[c.segment].name, onclick: function () { video.pause(); seek(summary.segments[c.segment].performer_start); } });
+      if (c.frame != null) pin = coach.el("button", { type: "button", class: "link pin", text: "frame " + c.frame, onclick: function () { video.pause(); seek(c.frame - first); } });
+      else if (c.segment != null && summary.segments[c.segment]) pin = coach.el("button", { type: "button", class: "link pin", text: summary.segments[c.segment].name, onclick: function () { video.pause(); seek(summary.segments[c.segment].performer_start - first); } });
       else pin = coach.el("span", { class: "pin", text: "general" });
       const del = coach.el("button", { type: "button", class: "link", text: "Delete", "aria-label": "Delete comment", onclick: async function () {
         await coach.api(base + "/comments/" + c.id, { method: "DELETE" }); loadComments(); } });
@@ -389,7 +411,7 @@
     if (!body) return;
     const pin = $("comment-pin").value;
     const data = { body: body };
-    if (pin === "frame") data.frame = frame;
+    if (pin === "frame") data.frame = frame + first;
     else if (pin.startsWith("segment:")) data.segment = +pin.split(":")[1];
     const button = this.querySelector("button[type=submit]");
     button.disabled = true;

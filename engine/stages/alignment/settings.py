@@ -72,6 +72,13 @@ class AlignmentSettings:
         (:func:`engine.stages.perception.keypoint_offsets`) from the keypoints here and in the
         camera's polish too, not only in stage 3. Off: on the public cases the mean timing
         error grew with them, most on P4.
+    repetitions : bool
+        When the keypoints show several whole performances of the reference (a set of
+        squats), align only the first of them, with the rest the reference holds before and
+        after it, and list them all in the result
+        (:func:`engine.stages.repetitions.performances`). Beyond the thesis, whose stage 2
+        stretches one performance over the whole video. Needs the pose model; the user may
+        still pick frames himself (``coach analyze --frames``), which turns this off.
     """
 
     k: float = 10.0
@@ -93,6 +100,7 @@ class AlignmentSettings:
     keypoint_weight: float = 1.0
     keypoint_tau: float = 0.1
     keypoint_offsets: bool = False
+    repetitions: bool = True
 
 
 @dataclass(frozen=True)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -135,3 +136,11 @@ class ForegroundResult:
     @property
     def n_frames(self) -> int:
         return int(self.silhouettes.shape[0])
+
+    def cut(self, start: int, end: int) -> ForegroundResult:
+        """Frames ``start``..``end - 1`` only (the background is the whole video's)."""
+        sl = slice(start, end)
+        return dataclasses.replace(
+            self, silhouettes=self.silhouettes[sl], edges=self.edges[sl], skin=self.skin[sl],
+            flags=self.flags[sl],
+        )  # fmt: skip

@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from engine.errors import InvalidInput
-from engine.stages.repetitions import excursions, find_repetitions
+from engine.stages.repetitions import excursions, find_repetitions, performances
 
 
 def _path(length: int, n_c: int) -> np.ndarray:
@@ -156,3 +156,60 @@ def test_the_rest_posture_comes_from_the_reference_not_the_calmest_frames():
     reps = excursions(_squat_frames(depth), STAND, fps)
     found = [t for r in reps for t in (r.start, r.end)]
     assert found == pytest.approx([5, 16, 25, 36, 45, 56], abs=1)
+
+
+# ---- performances: the excursions grouped as the reference's own, with its rest around them
+def _reference_squat(fps: float) -> np.ndarray:
+    """(T, 17, 2): 1 s standing, a 2 s squat, 1 s standing."""
+    n = int(4 * fps)
+    return _squat_frames(_squats([(int(fps), int(3 * fps))], n))
+
+
+def test_performances_cut_each_squat_of_a_set_with_the_reference_rest_around_it(rng):
+    ref_fps, fps = 40.0, 10.0
+    depth = _squats([(20, 40), (70, 90), (120, 140)], 160)  # three squats, as slow as the ref
+    kp = _squat_frames(depth) + rng.normal(0, 0.5, (160, 17, 2))
+    found = performances(kp, _reference_squat(ref_fps), fps, ref_fps)
+    assert found.per_performance == 1
+    assert len(found.found) == 3
+    for r, (a, b) in zip(found.found, [(20, 40), (70, 90), (120, 140)], strict=True):
+        # the whole squat, with about the reference's 1 s (10 frames) of rest before it
+        assert r.start <= a and r.end >= b
+        assert a - r.start == pytest.approx(10, abs=3)
+    assert all(a.end <= b.start for a, b in zip(found.found, found.found[1:], strict=False))
+    doc = found.to_dicts(fps, analysed=0, offset=5)
+    assert [d["analysed"] for d in doc] == [True, False, False]
+    assert doc[0]["start"] == found.found[0].start + 5
+    assert doc[0]["start_s"] == pytest.approx(doc[0]["start"] / fps, abs=0.01)
+
+
+def test_performances_scale_the_rest_with_the_performers_pace(rng):
+    ref_fps, fps = 40.0, 10.0
+    depth = _squats([(20, 60), (100, 140)], 170)  # each squat takes twice the reference's time
+    found = performances(_squat_frames(depth), _reference_squat(ref_fps), fps, ref_fps)
+    first = found.found[0]
+    assert first.start == pytest.approx(20 + 2 - 20, abs=3)  # 1 s of rest at half the pace
+    assert first.end == pytest.approx(80, abs=3)  # halfway to the next squat
+
+
+def test_one_performance_or_none_is_left_to_stage_2(rng):
+    ref_fps, fps = 40.0, 10.0
+    one = _squat_frames(_squats([(10, 30)], 45))
+    assert performances(one, _reference_squat(ref_fps), fps, ref_fps).found == ()
+    still = _squat_frames(np.zeros(45)) + rng.normal(0, 0.5, (45, 17, 2))
+    assert performances(still, _reference_squat(ref_fps), fps, ref_fps).found == ()
+
+
+def test_a_reference_that_never_leaves_its_first_posture_finds_nothing():
+    ref = _squat_frames(np.zeros(80))
+    kp = _squat_frames(_squats([(10, 30), (45, 65)], 80))
+    found = performances(kp, ref, 10.0, 40.0)
+    assert found.found == () and found.per_performance == 0
+
+
+def test_performances_validation():
+    ref = _reference_squat(40.0)
+    with pytest.raises(InvalidInput, match="must be \\(T, 17, 2\\)"):
+        performances(np.zeros((10, 16, 2)), ref, 10.0, 40.0)
+    with pytest.raises(InvalidInput, match="fps and reference_fps must be > 0"):
+        performances(np.zeros((10, 17, 2)), ref, 0.0, 40.0)
