@@ -211,8 +211,9 @@ def excursions(
     Returns
     -------
     list of Repetition
-        Complete excursions only (the performer is back at rest before the video ends), in
-        video order; ``mean_cost`` is the excursion's mean e.
+        Complete excursions only (the performer leaves the rest posture after the video
+        starts and is back before it ends), in video order; ``mean_cost`` is the
+        excursion's mean e.
     """
     x = posture_descriptor(keypoints)
     ref = posture_descriptor(np.asarray(start_posture, dtype=float)[None])[0]
@@ -231,12 +232,17 @@ def excursions(
         start = t
         while t < n and away[t]:
             t += 1
-        if t < n and (t - start) / fps >= min_s:
+        # whole only: seen leaving the rest posture and coming back to it inside the video
+        if 0 < start and t < n and (t - start) / fps >= min_s:
             out.append(Repetition(start, t, float(e[start:t].mean())))
     # a repetition lasts about as long as the others: half the typical one is something else
     # (re-racking a bar, a step to the side)
     typical = float(np.median([r.end - r.start for r in out])) if out else 0.0
     return [r for r in out if r.end - r.start >= 0.5 * typical]
+
+
+#: Slowest and fastest pace of a performance against the reference's (either way).
+MAX_PACE = 3.0
 
 
 @dataclass(frozen=True)
@@ -319,10 +325,16 @@ def performances(
         return Performances((), 0)
     m = len(own)
     seen = excursions(kp, ref[0], fps, min_s=min_s)
+    ref_moving = (own[-1].end - own[0].start) / reference_fps
     groups = [seen[i : i + m] for i in range(0, len(seen) - m + 1, m)]
+    # a performance takes between a third and three times the reference's time (stage 2's
+    # window allows no more); anything else is another motion
+    groups = [
+        g for g in groups
+        if 1 / MAX_PACE <= (g[-1].end - g[0].start) / fps / max(ref_moving, 1e-9) <= MAX_PACE
+    ]  # fmt: skip
     if len(groups) < 2:
         return Performances((), m)
-    ref_moving = (own[-1].end - own[0].start) / reference_fps
     lead, tail = own[0].start / reference_fps, (len(ref) - own[-1].end) / reference_fps
     spans = [(g[0].start, g[-1].end, float(np.mean([r.mean_cost for r in g]))) for g in groups]
     found = []

@@ -213,3 +213,16 @@ def test_performances_validation():
         performances(np.zeros((10, 16, 2)), ref, 10.0, 40.0)
     with pytest.raises(InvalidInput, match="fps and reference_fps must be > 0"):
         performances(np.zeros((10, 17, 2)), ref, 0.0, 40.0)
+
+
+def test_an_excursion_under_way_when_the_video_starts_is_not_whole():
+    depth = _squats([(30, 50)], 70)
+    depth[:12] = np.linspace(1.0, 0.0, 12)  # already squatting at the first frame
+    reps = excursions(_squat_frames(depth), STAND, 10.0)
+    assert [(r.start, r.end) for r in reps] == [pytest.approx((32, 48), abs=2)]
+
+
+def test_performances_far_slower_than_the_reference_are_another_motion():
+    ref_fps, fps = 40.0, 10.0
+    slow = _squats([(10, 90), (110, 190)], 200)  # 8 s squats against the reference's 2 s
+    assert performances(_squat_frames(slow), _reference_squat(ref_fps), fps, ref_fps).found == ()
