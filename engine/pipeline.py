@@ -216,8 +216,7 @@ def select(
         reference_frames=int(prepared.reference_joints.shape[0]),
         reference_fps=prepared.reference_fps,
         video={"frames": v.file_frames or v.offset + v.frames, "fps": v.fps,
-               "width": v.original_width, "height": v.original_height,
-               "first_frame": v.offset},
+               "width": v.original_width, "height": v.original_height},
         camera=camera, selection=selection, candidates=cands, timing_s=timing,
         domain=prepared.domain, video_frame_offset=v.offset,
     )  # fmt: skip

@@ -50,7 +50,8 @@ def build_result(
     reference_name, reference_frames, reference_fps
         Of the BVH file as given (frame count includes a conversion T-pose).
     video : mapping
-        ``frames``, ``fps``, ``width``, ``height`` of the whole video.
+        ``frames``, ``fps``, ``width``, ``height`` of the whole video (the analysed frames
+        start at ``video_frame_offset``, the result's ``video.first_frame``).
     camera : Camera
         Stage 1's camera, for ``joints_2d`` (thesis 4.2).
     selection : Selection
@@ -100,6 +101,7 @@ def build_result(
         "video": {
             "frames": int(video["frames"]), "fps": float(video["fps"]),
             "width": int(video["width"]), "height": int(video["height"]),
+            "first_frame": int(video_frame_offset),
         },
         "joints": list(JOINTS),
         "bones": list(BONE_NAMES),

@@ -9,12 +9,17 @@ import pytest
 
 from engine.io.bvh import load_reference
 from engine.io.encode import write_video
-from engine.pipeline import prepare
+from engine.io.result import validate_result
+from engine.pipeline import Prepared, candidates, prepare, select
 from engine.settings import Settings
 from engine.synth import SynthSettings, synthesize
 
 SQUAT = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "cmu" / "64_17.bvh"
-S = Settings.from_dict({"preset": "fast"})
+#: stages 0-2 as configured, stage 3 small (test_pipeline.py's)
+S = Settings.from_dict({
+    "preset": "fast",
+    "candidates": {"n_samples": 8, "n_iterations": 2, "refine_sweeps": 1, "n_candidates": 4},
+})  # fmt: skip
 
 
 @pytest.fixture(scope="module")
@@ -35,9 +40,16 @@ def two_squats(tmp_path_factory) -> tuple[Path, int]:
     return video, len(synth.frames)
 
 
-def test_the_first_of_two_performances_is_analysed_and_both_are_listed(two_squats) -> None:
+@pytest.fixture(scope="module")
+def cut(two_squats) -> Prepared:
+    return prepare(SQUAT, two_squats[0], S)
+
+
+def test_the_first_of_two_performances_is_analysed_and_both_are_listed(
+    two_squats, cut
+) -> None:
     video, one = two_squats
-    p = prepare(SQUAT, video, S)
+    p = cut
     reps = p.repetitions
     assert len(reps) == 2
     assert [r["analysed"] for r in reps] == [True, False]
@@ -64,3 +76,17 @@ def test_one_performance_is_left_whole(two_squats) -> None:
     video, one = two_squats
     p = prepare(SQUAT, video.with_name("one_squat.mp4"), S)
     assert p.repetitions == () and p.n_frames == one and p.video.offset == 0
+
+
+def test_the_result_counts_the_files_frames_and_names_the_repetitions(cut) -> None:
+    doc = select(cut, [candidates(cut, r, S) for r in cut.chunks(2)], S)
+    validate_result(doc)
+    a = cut.video.offset
+    assert doc["video"]["first_frame"] == a == doc["frames"][0]["t"]
+    assert [f["t"] for f in doc["frames"]] == list(range(a, a + cut.n_frames))
+    assert doc["video"]["frames"] == cut.video.file_frames
+    assert all(a <= s["performer_start"] <= s["performer_end"] < a + cut.n_frames
+               for s in doc["segments"])  # fmt: skip
+    reps = doc["summary"]["repetitions"]
+    assert [r["analysed"] for r in reps] == [True, False]
+    assert doc["summary"]["messages"][0].startswith("The video holds 2 whole repetitions")
