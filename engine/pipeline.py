@@ -104,8 +104,7 @@ def prepare(
         s = dataclasses.replace(s, alignment=dataclasses.replace(s.alignment, repetitions=False))
     t0 = time.perf_counter()
     reference = load_reference(reference_path, mapping=mapping, units_to_m=units_to_m)
-    video, offset = _read_frames(video_path, s, frames)
-    file_frames = int(video.n_frames) if frames is None else int(frames[1] - frames[0])
+    video, offset, file_frames = _read_frames(video_path, s, frames)
     segments = reference_segments(reference.motion, domain)  # thesis 2.1.1 item 4, 6.8
     load_s = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -123,7 +122,7 @@ def prepare(
         video=AnalysedVideo(frames=r.foreground.n_frames, fps=float(video.fps), width=int(w),
                             height=int(h), original_width=int(video.original_width),
                             original_height=int(video.original_height), offset=offset,
-                            file_frames=file_frames + offset - r.first_frame),
+                            file_frames=file_frames),
         camera=r.camera, silhouettes=r.foreground.silhouettes, edges=r.foreground.edges,
         C=np.asarray(r.alignment.C, dtype=int),
         rotations=np.asarray(r.alignment.rotations, float), segments=segments, domain=domain,
@@ -134,11 +133,7 @@ def prepare(
         keypoint_confidence=None if perception is None else perception.confidence,
         keypoint_offsets=None if perception is None else r.keypoint_offsets,
         perception_model="" if perception is None else perception.model,
-        repetitions=tuple(
-            {**p, "start": p["start"] + offset - r.first_frame,
-             "end": p["end"] + offset - r.first_frame}
-            for p in r.repetitions
-        ),
+        repetitions=r.repetitions,  # found only in a whole video: its frames are the file's
     )  # fmt: skip
 
 
@@ -297,11 +292,12 @@ def run_stages_0_2(
     t0 = time.perf_counter()
     cameras = _calibrate_views(joints[c0], reference.shape, fg, s, perception, on_progress)
     timing["calibration"] = time.perf_counter() - t0
-    first, found = 0, ()  # type: tuple[int, tuple[dict, ...]]
+    first = 0
+    found: tuple[dict, ...] = ()
     if s.alignment.repetitions and perception is not None:
-        first, found = _first_performance(reference, cameras[0], perception, video.fps)
+        found = _performances(reference, cameras[0], perception, video.fps)
         if found:  # stage 2 and after see the first performance only
-            end = int(found[0]["end"])
+            first, end = int(found[0]["start"]), int(found[0]["end"])
             fg, perception = fg.cut(first, end), perception.cut(first, end)
     views = _Views(perception, joints[c0], cal.offset_frames, s.alignment.keypoint_offsets)
     t0 = time.perf_counter()
@@ -335,33 +331,32 @@ def run_stages_0_2(
                     first, found, perception)  # fmt: skip
 
 
-def _first_performance(
+def _performances(
     reference: Reference, camera: Camera, perception: Perception, fps: float
-) -> tuple[int, tuple[dict, ...]]:
-    """Where the first of several whole performances starts, and all of them
-    (``AlignmentSettings.repetitions``); (0, ()) when the video holds one or none."""
+) -> tuple[dict, ...]:
+    """The whole performances when the video holds several, the first marked analysed
+    (``AlignmentSettings.repetitions``); () when it holds one or none."""
     from engine.stages.repetitions import performances
 
     motion = reference.motion
     ref_2d = camera.project(motion.joints[motion.first_motion_frame :])
     found = performances(perception.keypoints, ref_2d, fps, float(motion.fps))
-    if not found.found:
-        return 0, ()
-    return found.found[0].start, tuple(found.to_dicts(fps, analysed=0))
+    return tuple(found.to_dicts(fps, analysed=0))
 
 
 def _read_frames(
     video_path: PathLike, s: Settings, frames: tuple[int, int] | None
-) -> tuple[Video, int]:
-    """The video at working resolution, cut to ``frames`` (a, b); and its first frame."""
+) -> tuple[Video, int, int]:
+    """The video at working resolution, cut to ``frames`` (a, b); its first frame; and how
+    many frames the file holds."""
     video = read_video(video_path, height=s.working_height, limits=s.video)
     if frames is None:
-        return video, 0
+        return video, 0, int(video.n_frames)
     a, b = frames
     if not 0 <= a < b <= video.n_frames or b - a < 2:
         raise InvalidInput(f"frames must be a range of >= 2 frames within 0..{video.n_frames}")
     cut = dataclasses.replace(video, frames=video.frames[a:b], timestamps_s=video.timestamps_s[a:b])
-    return cut, a
+    return cut, a, int(video.n_frames)
 
 
 def _perceive(video: Video, s: Settings, on_progress: ProgressFn | None) -> Perception | None:

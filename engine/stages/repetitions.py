@@ -325,21 +325,22 @@ def performances(
         return Performances((), 0)
     m = len(own)
     seen = excursions(kp, ref[0], fps, min_s=min_s)
-    ref_moving = (own[-1].end - own[0].start) / reference_fps
+    ref_moving = max((own[-1].end - own[0].start) / reference_fps, 1e-9)
     groups = [seen[i : i + m] for i in range(0, len(seen) - m + 1, m)]
+    # (start, end, mean e, pace: video seconds per reference second) of each group
+    spans = [
+        (g[0].start, g[-1].end, float(np.mean([r.mean_cost for r in g])),
+         (g[-1].end - g[0].start) / fps / ref_moving)
+        for g in groups
+    ]  # fmt: skip
     # a performance takes between a third and three times the reference's time (stage 2's
     # window allows no more); anything else is another motion
-    groups = [
-        g for g in groups
-        if 1 / MAX_PACE <= (g[-1].end - g[0].start) / fps / max(ref_moving, 1e-9) <= MAX_PACE
-    ]  # fmt: skip
-    if len(groups) < 2:
+    spans = [sp for sp in spans if 1 / MAX_PACE <= sp[3] <= MAX_PACE]
+    if len(spans) < 2:
         return Performances((), m)
     lead, tail = own[0].start / reference_fps, (len(ref) - own[-1].end) / reference_fps
-    spans = [(g[0].start, g[-1].end, float(np.mean([r.mean_cost for r in g]))) for g in groups]
     found = []
-    for i, (start, end, cost) in enumerate(spans):
-        pace = (end - start) / fps / max(ref_moving, 1e-9)  # video seconds per reference second
+    for i, (start, end, cost, pace) in enumerate(spans):
         lo = 0 if i == 0 else (spans[i - 1][1] + start) // 2
         hi = len(kp) if i == len(spans) - 1 else (end + spans[i + 1][0] + 1) // 2
         a = max(lo, int(round(start - lead * pace * fps)))
