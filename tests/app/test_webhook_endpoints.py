@@ -135,6 +135,19 @@ def test_an_invalid_endpoint_is_refused(client, club, body):
     assert r.json()["error"]["code"] == "invalid_request"
 
 
+@pytest.mark.settings(webhook_allow_private=True)
+def test_a_club_has_at_most_the_documented_number_of_endpoints(client, club):
+    from app.api.routes.webhooks import MAX_ENDPOINTS
+
+    for i in range(MAX_ENDPOINTS):
+        assert create(client, club, url=f"http://127.0.0.1:9/{i}").status_code == 201
+    r = create(client, club, url="http://127.0.0.1:9/one-more")
+    assert r.status_code == 409, r.text
+    assert r.json()["error"]["code"] == "limit_reached"
+    listed = client.get("/api/v1/webhooks?limit=100", headers=club.headers).json()
+    assert listed["total"] == MAX_ENDPOINTS
+
+
 def test_an_internal_url_is_refused_when_set(client, club, monkeypatch):
     r = create(client, club, url="http://127.0.0.1/hook")
     assert r.status_code == 422
