@@ -36,7 +36,13 @@ def forward_kinematics(
     R = np.asarray(R_world_part, dtype=float)
     # bone vectors in the world, all at once: (..., 16, 3)
     vec = np.einsum("...bij,bj->...bi", R[..., BONE_PART, :, :], offsets)
-    joints = np.empty(root.shape[:-1] + (17, 3))
+    return joints_from_bones(root, vec)
+
+
+def joints_from_bones(root: np.ndarray, vec: np.ndarray) -> np.ndarray:
+    """Joint positions from the root (..., 3) and world bone vectors (..., 16, 3) ->
+    (..., 17, 3): the inverse of :func:`bone_vectors`."""
+    joints = np.empty(np.shape(root)[:-1] + (17, 3))
     joints[..., 0, :] = root
     for b in range(16):  # topological order: the parent joint is always set already
         joints[..., BONE_CHILD[b], :] = joints[..., BONE_PARENT[b], :] + vec[..., b, :]
