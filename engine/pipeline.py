@@ -27,7 +27,7 @@ from engine.errors import InvalidInput
 from engine.io.bvh import Reference, load_reference
 from engine.io.result import build_result
 from engine.io.video import Video, read_video
-from engine.reference.domain import Domain, parse_domain, reference_segments
+from engine.reference.domain import Domain, check_variation, parse_domain, reference_segments
 from engine.render.camera import Camera
 from engine.settings import Settings
 from engine.stage_outputs import AnalysedVideo, CandidateChunk, Prepared, Stages02
@@ -106,6 +106,7 @@ def prepare(
     reference = load_reference(reference_path, mapping=mapping, units_to_m=units_to_m)
     video, offset, file_frames = _read_frames(video_path, s, frames)
     segments = reference_segments(reference.motion, domain)  # thesis 2.1.1 item 4, 6.8
+    check_variation(reference.motion, domain)  # seed 002: the takes' spread, frame by frame
     load_s = time.perf_counter() - t0
     t0 = time.perf_counter()
     perception = _perceive(video, s, on_progress)

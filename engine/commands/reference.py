@@ -14,13 +14,14 @@ from pathlib import Path
 import numpy as np
 
 from engine.body.skeleton import JOINTS
+from engine.commands import reference_build
 from engine.errors import InvalidInput
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "reference",
-        help="inspect a reference motion (BVH)",
+        help="inspect a reference motion (BVH), or build one from several takes",
         description="Tools for reference motions (BVH).",
     )
     sub = p.add_subparsers(dest="reference_command", required=True)
@@ -52,6 +53,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--units-to-m", type=float, default=None, help="metres per file unit (default: guessed)"
     )
     q.set_defaults(func=run)
+    reference_build.register(sub)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -89,6 +89,9 @@ def build_result(
         _segment_doc(j, s, names, domain, reference_frame_offset, video_frame_offset)
         for j, s in enumerate(selection.segments)
     ]
+    summary = _summary(selection, score)
+    if domain is not None and getattr(domain, "bone_sd", None) is not None:
+        add_variation(frames, segments, summary, selection, domain, reference_frame_offset)
     timing = {k: float(v) for k, v in timing_s.items()}
     timing.setdefault("total", float(sum(timing.values())))
     cam = camera.to_dict()
@@ -108,7 +111,7 @@ def build_result(
         "camera": cam,
         "frames": frames,
         "segments": segments,
-        "summary": _summary(selection, score),
+        "summary": summary,
         "domain": domain.to_dict() if domain is not None else None,
         "timing_s": timing,
     }  # fmt: skip
@@ -176,6 +179,43 @@ def _segment_doc(
     if domain is not None:
         seg["score_deg"] = float(np.round(np.degrees(domain.score(s.bone_mean_errors)), 3))
     return seg
+
+
+def add_variation(
+    frames: list[dict[str, Any]],
+    segments: list[dict[str, Any]],
+    summary: dict[str, Any],
+    selection: Selection,
+    domain: Any,
+    reference_frame_offset: int,
+) -> None:
+    """Errors against the expert's own variation (seed 002 eq. 22, a reference built from
+    several takes). Per frame: ``bone_z``, ``outside_expert_range`` and the mean spread of the
+    expert's bones there (``expert_spread_deg``, the error plot's band). Per segment:
+    ``bone_mean_z``, ``within_expert_range`` and ``outside_bones``. In the summary: the share
+    of frames outside."""
+    ref = np.asarray(selection.C, int) + reference_frame_offset
+    z = domain.z_scores(selection.bone_errors, ref)  # (T', 16)
+    outside = z.max(axis=1) > domain.z_limit
+    spread = np.maximum(domain.bone_sd, domain.sd_floor)  # (T, 16)
+    at = np.degrees(spread[np.clip(ref, 0, len(spread) - 1)].mean(axis=1))  # (T',)
+    for f, zi, out, sp in zip(frames, z, outside, at, strict=True):
+        f["bone_z"] = _r(zi, 2)
+        f["outside_expert_range"] = bool(out)
+        f["expert_spread_deg"] = float(np.round(sp, 3))
+    for seg, s in zip(segments, selection.segments, strict=True):
+        span = spread[s.reference_start + reference_frame_offset : s.reference_end
+                      + reference_frame_offset + 1]  # fmt: skip
+        zs = s.bone_mean_errors / span.mean(axis=0)
+        seg["bone_mean_z"] = _r(zs, 2)
+        seg["within_expert_range"] = bool(zs.max() <= domain.z_limit)
+        seg["outside_bones"] = [BONE_NAMES[b] for b in np.argsort(-zs) if zs[b] > domain.z_limit]
+    share = float(outside.mean())
+    summary["outside_expert_range_share"] = round(share, 4)
+    summary["messages"].append(
+        f"{share:.0%} of the analysed frames are outside the expert's own range "
+        f"(a bone over {domain.z_limit:g} times the spread of the expert's takes there)."
+    )
 
 
 def _summary(selection: Selection, score: np.ndarray | None) -> dict[str, Any]:

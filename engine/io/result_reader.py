@@ -88,6 +88,12 @@ class ResultFrame:
     """The domain's weighted error (with a domain file only)."""
     bone_error_range_deg: np.ndarray | None = None
     """[lo, hi] per bone over the candidates the video cannot tell apart. Shape (16, 2)."""
+    bone_z: np.ndarray | None = None
+    """Each bone's error over the expert's spread there (references built from several
+    takes only). Shape (16,)."""
+    outside_expert_range: bool | None = None
+    expert_spread_deg: float | None = None
+    """Mean spread of the expert's bones at C(t') (floored), degrees."""
     image_best: int | None = None
     """In ``image_misfit`` frames: index of the candidate that fits the video best."""
     image_best_joints_2d: np.ndarray | None = None
@@ -121,6 +127,10 @@ class ResultSegment:
     bone_uncertainty_deg: np.ndarray | None = None
     """Mean width of ``bone_error_range_deg`` per bone over the segment. Shape (16,); None
     for results that predate it and for a segment without frames."""
+    bone_mean_z: np.ndarray | None = None
+    """``bone_mean_errors_deg`` over the expert's mean spread in the segment. Shape (16,)."""
+    within_expert_range: bool | None = None
+    outside_bones: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -147,6 +157,7 @@ class ResultSummary:
     score_deg: float | None = None
     messages: tuple[str, ...] = ()
     fit: Fit | None = None
+    outside_expert_range_share: float | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -349,6 +360,9 @@ def _frame(v: Any, where: str) -> ResultFrame:
         bone_error_range_deg=_opt_array(m, "bone_error_range_deg", (N_BONES, 2), where),
         image_best=image_best,
         image_best_joints_2d=_opt_array(m, "image_best_joints_2d", (N_JOINTS, 2), where),
+        bone_z=_opt_array(m, "bone_z", (N_BONES,), where),
+        outside_expert_range=_opt(m, "outside_expert_range", where, _bool),
+        expert_spread_deg=_opt(m, "expert_spread_deg", where, _num),
     )
 
 
@@ -381,6 +395,9 @@ def _segment(v: Any, where: str) -> ResultSegment:
         bone_uncertainty_deg=(
             _opt_array(m, "bone_uncertainty_deg", (N_BONES,), where) if uncertainty else None
         ),
+        bone_mean_z=_opt_array(m, "bone_mean_z", (N_BONES,), where),
+        within_expert_range=_opt(m, "within_expert_range", where, _bool),
+        outside_bones=_opt(m, "outside_bones", where, _strings) or (),
     )
 
 
@@ -394,6 +411,7 @@ def _summary(v: Any, where: str) -> ResultSummary:
         score_deg=_opt(m, "score_deg", where, _num),
         messages=_opt(m, "messages", where, _strings) or (),
         fit=_opt(m, "fit", where, _fit),
+        outside_expert_range_share=_opt(m, "outside_expert_range_share", where, _num),
     )
 
 

@@ -15,7 +15,9 @@ stance is both fine). They change the *reported score* only, never the raw error
       "bone_weights": {"hip->lower_chest": 3, "l_elbow": 2},
       "tolerances_deg": {"l_knee": 15, "r_knee": 15},
       "default_tolerance_deg": 0,
-      "boundary": {"joints": ["r_wrist"], "direction_change_deg": 120}
+      "boundary": {"joints": ["r_wrist"], "direction_change_deg": 120},
+      "variation": {"bone_sd_deg": [[2.1, 3.0, ...], ...], "sd_floor_deg": 5, "z_limit": 3,
+                    "takes": ["63_01", "63_02"], "median_take": "63_01"}
     }
 
 ``segments`` (optional) lists the reference frame each segment starts at (frame numbers count
@@ -23,6 +25,11 @@ the file's frames); the last segment ends at the motion's last frame. Without it
 boundaries are detected from the ``boundary`` joints' direction changes (thesis 5.4.2), and
 ``segment_names`` must then name as many segments as are detected (``coach reference inspect
 REF.bvh`` prints them).
+
+``variation`` (optional, written by ``coach reference build`` from several takes, seed 002)
+gives the expert's own spread of every bone at every reference frame (one row of 16 per frame
+of the file). An analysis then also reports each error as ``z = error / max(sd, floor)`` and
+calls a bone outside the expert's range where z exceeds ``z_limit``.
 
 Bones are named either ``parent->child`` (:data:`engine.body.skeleton.BONE_NAMES`) or by the
 joint they end at (``"l_elbow"`` = upper arm ``l_shoulder->l_elbow``). Unnamed bones get weight
@@ -47,8 +54,9 @@ from engine.types import Motion, Segments
 GOLF_SEGMENT_NAMES = ("address", "takeaway", "top", "downswing", "impact", "finish")
 _KEYS = {
     "version", "sport", "segment_names", "bone_weights", "tolerances_deg",
-    "default_tolerance_deg", "boundary", "notes", "segments",
+    "default_tolerance_deg", "boundary", "notes", "segments", "variation",
 }  # fmt: skip
+_VARIATION_KEYS = {"bone_sd_deg", "sd_floor_deg", "z_limit", "takes", "median_take"}
 
 
 @dataclass(frozen=True)
@@ -70,6 +78,12 @@ class Domain:
         Joints whose direction change marks a boundary (empty: stage-4 default).
     direction_change_deg : float or None
         Boundary threshold (thesis 5.4.2: 60 Taichi, 120 golf); None: stage-4 default.
+    bone_sd : ndarray, shape (T, 16), or None
+        Radians: the expert's spread of each bone at each reference frame (seed 002 eq. 22).
+    sd_floor : float
+        Radians: the smallest spread a z-score divides by (below it the engine cannot measure).
+    z_limit : float
+        A bone whose error exceeds this many spreads is outside the expert's range.
     doc : dict or None
         The validated document it was parsed from (:func:`parse_domain`; None for a domain
         built in code): what a stage output stores, so reading it back gives this domain
@@ -83,7 +97,30 @@ class Domain:
     tolerances: np.ndarray = field(default_factory=lambda: np.zeros(N_BONES))
     boundary_joints: tuple[str, ...] = ()
     direction_change_deg: float | None = None
+    bone_sd: np.ndarray | None = field(default=None, compare=False, repr=False)
+    sd_floor: float = float(np.radians(5.0))
+    z_limit: float = 3.0
     doc: dict[str, Any] | None = field(default=None, compare=False, repr=False)
+
+    def z_scores(self, bone_errors: np.ndarray, reference_frames: np.ndarray) -> np.ndarray:
+        """Errors against the expert's own variation: ``error / max(sd, floor)``.
+
+        Parameters
+        ----------
+        bone_errors : ndarray, shape (N, 16)
+            Radians.
+        reference_frames : ndarray, shape (N,)
+            The file's reference frame each error was measured at.
+
+        Returns
+        -------
+        z : ndarray, shape (N, 16)
+            Finite, since the floor is positive.
+        """
+        if self.bone_sd is None:
+            raise InvalidInput("this reference has no variation: build it from several takes")
+        frames = np.clip(np.asarray(reference_frames, int), 0, len(self.bone_sd) - 1)
+        return np.asarray(bone_errors, float) / np.maximum(self.bone_sd[frames], self.sd_floor)
 
     def score(self, bone_errors: np.ndarray) -> np.ndarray:
         """Domain-specific error: weighted mean of the excess over each bone's tolerance.
@@ -110,7 +147,16 @@ class Domain:
             "tolerances_deg": [float(t) for t in np.degrees(self.tolerances)],
             "boundary_joints": list(self.boundary_joints),
             "direction_change_deg": self.direction_change_deg,
+            **({} if self.bone_sd is None else {"variation": self._variation_summary()}),
         }
+
+    def _variation_summary(self) -> dict[str, Any]:
+        v = (self.doc or {}).get("variation", {})
+        return {
+            "frames": int(len(self.bone_sd)) if self.bone_sd is not None else 0,
+            "sd_floor_deg": float(np.degrees(self.sd_floor)), "z_limit": self.z_limit,
+            "takes": list(v.get("takes", [])), "median_take": v.get("median_take", ""),
+        }  # fmt: skip
 
 
 def _bone_index(name: str, where: str) -> int:
@@ -174,11 +220,50 @@ def parse_domain(doc: Any, *, n_segments: int | None = None, source: str = "doma
     names, starts = _segments(doc, source, n_segments)
     weights, tolerances = _bone_numbers(doc, source)
     joints, change = _boundary(doc.get("boundary", {}), f"{source}.boundary")
+    sd, floor, z_limit = _variation(doc.get("variation"), f"{source}.variation")
     return Domain(
         sport=sport, segment_names=names, segment_starts=starts, bone_weights=weights,
         tolerances=tolerances, boundary_joints=joints, direction_change_deg=change,
-        doc=dict(doc),
+        bone_sd=sd, sd_floor=floor, z_limit=z_limit, doc=dict(doc),
     )  # fmt: skip
+
+
+def _variation(doc: Any, where: str) -> tuple[np.ndarray | None, float, float]:
+    """The expert's spread (T, 16) radians, its floor (radians) and the z limit."""
+    floor, z_limit = float(np.radians(5.0)), 3.0
+    if doc is None:
+        return None, floor, z_limit
+    if not isinstance(doc, dict) or set(doc) - _VARIATION_KEYS or "bone_sd_deg" not in doc:
+        raise InvalidInput(f"{where}: expected an object with 'bone_sd_deg' and optionally "
+                           f"{sorted(_VARIATION_KEYS - {'bone_sd_deg'})}")  # fmt: skip
+    try:
+        sd = np.asarray(doc["bone_sd_deg"], dtype=float)
+    except (TypeError, ValueError):
+        sd = np.empty(0)
+    if sd.ndim != 2 or sd.shape[1] != N_BONES or len(sd) < 1 or not np.isfinite(sd).all() \
+            or (sd < 0).any() or (sd > 180).any():  # fmt: skip
+        raise InvalidInput(f"{where}.bone_sd_deg: expected one row of {N_BONES} numbers "
+                           "in [0, 180] per reference frame")  # fmt: skip
+    floor = np.radians(_number(doc.get("sd_floor_deg", 5.0), f"{where}.sd_floor_deg"))
+    if floor <= 0:
+        raise InvalidInput(f"{where}.sd_floor_deg: must be positive (z divides by it)")
+    z_limit = _number(doc.get("z_limit", 3.0), f"{where}.z_limit")
+    return np.radians(sd), float(floor), z_limit
+
+
+def check_variation(motion: Motion, domain: Domain | None) -> None:
+    """A domain's variation must have one row per frame of the reference it describes.
+
+    Raises
+    ------
+    InvalidInput
+        The row count differs: the variation was built for another reference.
+    """
+    if domain is not None and domain.bone_sd is not None and len(domain.bone_sd) != motion.frames:
+        raise InvalidInput(
+            f"domain variation: {len(domain.bone_sd)} rows for a reference of {motion.frames} "
+            "frames; it was built for another reference"
+        )
 
 
 def _segments(
@@ -302,6 +387,7 @@ def find_domain(
 __all__ = [
     "GOLF_SEGMENT_NAMES",
     "Domain",
+    "check_variation",
     "domain_path",
     "find_domain",
     "load_domain",

@@ -277,3 +277,31 @@ def test_the_thesis_preset_runs_without_the_pose_model(case_dir) -> None:
     q = prepare(case_dir["reference"], case_dir["video"], S)
     assert q.keypoints is not None and q.keypoints.shape == (q.n_frames, 17, 2)
     assert q.perception_model.startswith("mediapipe")
+
+
+def test_an_analysis_against_a_reference_from_takes_reports_the_experts_range(case_dir, tmp_path):
+    """Seed 002 end to end: three takes (the swing and two warps of it) -> `write_model` ->
+    the analysis reads the domain beside the BVH and adds z-scores against the spread."""
+    from engine.commands.reference_build import write_model
+    from engine.reference.action_model import Take, build_action_model
+    from engine.reference.domain import find_domain
+    from engine.reference.synchronisation import interpolate
+
+    shape = BodyShape.default(1.75)
+    joints = swing_joints(shape, 60)
+    u = np.linspace(0.0, 1.0, 60)
+    takes = [Take("swing", joints, 60.0, shape)] + [
+        Take(f"w{a}", interpolate(joints, (u + a * np.sin(2 * np.pi * u) / 6.3) * 59) +
+             np.random.default_rng(k).normal(0, 0.01, joints.shape), 60.0, shape)
+        for k, a in enumerate((0.3, -0.3))
+    ]  # fmt: skip
+    bvh, _, _ = write_model(build_action_model(takes), tmp_path / "swing3", sport="test")
+    domain = find_domain(bvh)
+    assert domain is not None and domain.bone_sd is not None
+    doc = analyze(bvh, case_dir["video"], S, domain=domain)
+    validate_result(doc)
+    assert all(len(f["bone_z"]) == 16 and f["expert_spread_deg"] >= 5.0 for f in doc["frames"])
+    share = doc["summary"]["outside_expert_range_share"]
+    assert share == pytest.approx(np.mean([f["outside_expert_range"] for f in doc["frames"]]))
+    assert all(isinstance(s["within_expert_range"], bool) for s in doc["segments"])
+    assert doc["domain"]["variation"]["takes"] == ["swing", "w0.3", "w-0.3"]

@@ -172,3 +172,35 @@ def test_skeleton_drawing_adds_what_the_video_suggests_dashed(result_doc):
     drawn = draw_skeleton(grey, j2, errs, video_suggests=j2 + [30.0, 0.0])
     assert amber(drawn) > 30
     np.testing.assert_array_equal(grey, 128)  # the frame itself is left alone
+
+
+def test_a_reference_with_the_experts_variation_adds_z_scores(rng):
+    ref = _reference()
+    C0 = np.arange(0, 41, 4)
+    cands = [np.stack([ref[c], ref[c] + rng.normal(0, 0.02, (17, 3))]) for c in C0]
+    sel = select_and_refine(cands, ref, Segments((0, 20), 40, ("a", "b")), C0, fps_ratio=4.0)
+    sd = np.full((42, 16), 10.0)
+    sd[21:, 12] = 0.0  # the expert never varies the right forearm in the second segment
+    domain = parse_domain({"variation": {"bone_sd_deg": sd.tolist(), "sd_floor_deg": 0.5,
+                                         "z_limit": 3}})  # fmt: skip
+    doc = build_result(
+        reference_name="arm", reference_frames=42, reference_fps=120.0,
+        video={"frames": 11, "fps": 30.0, "width": 320, "height": 240},
+        camera=Camera(scale=100.0, cx=160.0, cy=200.0), selection=sel, candidates=cands,
+        timing_s={}, domain=domain, reference_frame_offset=1,
+    )  # fmt: skip
+    validate_result(doc)
+    errors = np.array([f["bone_errors_deg"] for f in doc["frames"]])
+    z = np.array([f["bone_z"] for f in doc["frames"]])
+    ref_frames = np.array([f["reference_frame"] for f in doc["frames"]])
+    spread = np.maximum(sd[ref_frames], 0.5)
+    assert np.allclose(z, errors / spread, atol=0.01)
+    outside = [f["outside_expert_range"] for f in doc["frames"]]
+    assert outside == list((errors / spread).max(1) > 3)
+    share = doc["summary"]["outside_expert_range_share"]
+    assert share == pytest.approx(np.mean(outside), abs=1e-4)
+    assert any("outside the expert's own range" in m for m in doc["summary"]["messages"])
+    seg = doc["segments"]
+    assert all(len(s["bone_mean_z"]) == 16 for s in seg)
+    assert seg[0]["within_expert_range"] == (max(seg[0]["bone_mean_z"]) <= 3)
+    assert doc["domain"]["variation"]["frames"] == 42
