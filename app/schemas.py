@@ -259,6 +259,10 @@ class ReferencePublic(_Orm):
     thumbnail: str = ""
     strip: str = ""
     preview: str = ""
+    #: A reference built from several takes: their synchronisation plot (else empty). Its
+    #: ``derived.takes`` names the takes kept, the median take, the warnings and the
+    #: expert's spread per bone; ``domain_config.variation`` says how many frames it covers.
+    takes_plot: str = ""
 
     @model_validator(mode="after")
     def _derive(self) -> ReferencePublic:
@@ -269,10 +273,17 @@ class ReferencePublic(_Orm):
             config.get("segment_names") or []
         )
         self.segment_names = segment_names(config, n)
+        if isinstance(config.get("variation"), dict):  # thousands of numbers: summarised
+            variation = dict(config["variation"])
+            rows = variation.pop("bone_sd_deg", None)
+            variation["frames"] = len(rows) if isinstance(rows, list) else 0
+            config = {**config, "variation": variation}
+            self.domain_config = config
         self.domain = engine_domain(config)
         base = f"/api/v1/references/{self.id}"
         self.thumbnail, self.strip = f"{base}/thumbnail.svg", f"{base}/strip.svg"
         self.preview = f"{base}/preview.json"
+        self.takes_plot = f"{base}/takes.png" if "takes" in derived else ""
         return self
 
 
@@ -340,6 +351,13 @@ class SegmentPublic(BaseModel):
     #: cannot tell from the reported posture: wide for a bend in depth one camera cannot
     #: measure, narrow for an in-plane one. Empty for results that predate it.
     bone_uncertainty_deg: dict[str, float] = {}
+    #: Against a reference built from several takes: whether every bone's mean error lies
+    #: within ``z_limit`` times the expert's own spread there (None for a single-take
+    #: reference), and the bones that do not, worst first.
+    within_expert_range: bool | None = None
+    outside_bones: list[str] = []
+    #: Per bone, mean error over the expert's mean spread in the segment (z).
+    bone_mean_z: dict[str, float] = {}
 
 
 class SegmentsPublic(BaseModel):

@@ -43,6 +43,8 @@ class BodyLimitMiddleware:
         self.limits = {
             f"{API_PREFIX}/analyses": settings.max_video_bytes + extra,
             f"{API_PREFIX}/references": settings.max_bvh_bytes + settings.max_domain_bytes + extra,
+            f"{API_PREFIX}/references/takes": settings.max_reference_takes
+            * (settings.max_bvh_bytes + extra),
         }
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:

@@ -50,7 +50,11 @@ class Settings(BaseSettings):
     max_reference_frames: int = Field(default=36_000, gt=0)
     max_reference_joints: int = Field(default=256, gt=0)
     max_reference_duration_s: float = Field(default=600.0, gt=0)
-    max_domain_bytes: int = Field(default=64 * 1024, gt=0)
+    #: A reference built from takes keeps the expert's spread per frame in its domain
+    #: (16 numbers a frame: ~100 KB for 10 s at 120 fps), so a domain may be this large.
+    max_domain_bytes: int = Field(default=1024 * 1024, gt=0)
+    #: Most takes one reference may be built from (every pair is synchronised).
+    max_reference_takes: int = Field(default=12, ge=2)
     max_page_size: int = Field(default=100, ge=1, le=1000)
     #: An upload left in ``tmp/`` this long is from a process that died; removed at start.
     stale_upload_s: float = Field(default=3600.0, gt=0)

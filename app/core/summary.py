@@ -82,6 +82,9 @@ def summarise_segments(result: Result | Mapping[str, Any]) -> list[SegmentPublic
                 misfit_frames=len(inside),
                 misfit_bones=misfit_bones(inside, float(r.video.height)),
                 bone_uncertainty_deg=_by_bone(seg.bone_uncertainty_deg),
+                within_expert_range=seg.within_expert_range,
+                outside_bones=list(seg.outside_bones),
+                bone_mean_z=_by_bone(seg.bone_mean_z),
             )
         )
     return out

@@ -13,8 +13,8 @@ from typing import TYPE_CHECKING, Any
 
 from app.core.config import Settings
 from engine.errors import InvalidInput
+from engine.reference.domain import check_variation, reference_segments
 from engine.reference.domain import parse_domain as engine_parse
-from engine.reference.domain import reference_segments
 
 if TYPE_CHECKING:
     from engine.io.bvh import BvhLimits
@@ -128,6 +128,10 @@ def inspect_reference(
         segs = reference_segments(motion, knowledge)
     except InvalidInput as exc:  # the coach's starts lie outside the motion
         raise InvalidDomain(str(exc)) from None
+    try:
+        check_variation(motion, knowledge)
+    except InvalidInput as exc:
+        raise InvalidDomain(str(exc)) from None
     names = knowledge.segment_names
     if names and len(names) != len(segs.starts):
         found = ", ".join(str(s) for s in segs.starts)
@@ -145,3 +149,33 @@ def inspect_reference(
         "source_joints": list(ref.source_joint_names),
         "segments": [*segs.starts, segs.end],
     }
+
+
+def build_from_takes(
+    paths: list[Path], names: list[str], out_dir: Path, settings: Settings, sport: str = ""
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """A reference from several takes of one action (seed 002): the mean performance is
+    written to ``out_dir/reference.bvh`` and the synchronisation plot to ``takes.png``.
+
+    Returns the domain configuration (with the expert's spread per frame) and the derived
+    description, whose ``takes`` says which takes were kept, the median and what was left
+    out and why.
+
+    Raises
+    ------
+    InvalidInput
+        A take that is not BVH, cannot be mapped, is over the limits, or fewer than two
+        takes of one action (the message names the take).
+    """
+    from engine.io.bvh import write_bvh
+    from engine.reference.action_model import SD_FLOOR_DEG, build_action_model, load_takes
+    from engine.reference.takes_plot import plot_takes
+
+    takes = load_takes(paths, reference_limits(settings), names)
+    model = build_action_model(takes)
+    bvh = write_bvh(out_dir / "reference.bvh", model.file_joints, model.fps, model.shape)
+    plot_takes(model, out_dir / "takes.png")
+    domain = model.domain_doc(sport=sport, sd_floor_deg=SD_FLOOR_DEG)
+    derived = inspect_reference(bvh, domain)
+    derived["takes"] = model.summary()
+    return domain, derived

@@ -269,6 +269,17 @@
       s.append(svg("line", { x1: L, x2: W - R, y1: y(v), y2: y(v), stroke: "#e3e6ec" }));
       const t = svg("text", { x: 4, y: y(v) + 4, "font-size": 11, fill: "#5c6675" }); t.textContent = Math.round(v) + "°"; s.append(t);
     }
+    // A reference built from several takes: the expert's own spread at each matched frame,
+    // as a band from 0 (errors under it are within the expert's take-to-take variation).
+    const EXPERT = "#2f9e44";
+    const spreadBand = result.frames.every(function (f) { return f.expert_spread_deg != null; });
+    if (spreadBand) {
+      const upper = result.frames.map(function (f, i) { return x(i).toFixed(1) + "," + y(Math.min(f.expert_spread_deg, top)).toFixed(1); });
+      const base = [x(n - 1).toFixed(1) + "," + y(0).toFixed(1), x(0).toFixed(1) + "," + y(0).toFixed(1)];
+      const band = svg("polygon", { points: upper.concat(base).join(" "), fill: EXPERT, "fill-opacity": 0.18, class: "expert-band" });
+      const title = svg("title", {}); title.textContent = "the expert's own variation (mean spread of the bones over the expert's takes)"; band.append(title);
+      s.append(band);
+    }
     function line(vals, colour, width, name) {
       const pts = vals.map(function (v, i) { return x(i).toFixed(1) + "," + y(v).toFixed(1); }).join(" ");
       const pl = svg("polyline", { points: pts, fill: "none", stroke: colour, "stroke-width": width, "vector-effect": "non-scaling-stroke" });
@@ -292,6 +303,7 @@
     let lx = L + 200;
     const items = [["posture error", "#c92a2a"]].concat(bones.map(function (b, k) { return [BONES[b], PALETTE[k % PALETTE.length]]; }));
     if (misfit.some(Boolean)) items.push(["video disagrees", MISFIT]);
+    if (spreadBand) items.push(["expert's own variation", EXPERT]);
     items.forEach(function (it) {
       s.append(svg("rect", { x: lx, y: H - 15, width: 14, height: 4, fill: it[1] }));
       const t = svg("text", { x: lx + 18, y: H - 10, "font-size": 11, fill: "#333" }); t.textContent = it[0]; s.append(t);
@@ -336,6 +348,13 @@
   function spread(width) {
     return width != null && width >= 1 ? " (± " + Math.round(width / 2) + "°, depth unsure)" : "";
   }
+  // Against a reference built from several takes: is the segment a fault, or within the
+  // expert's own take-to-take variation?
+  function rangeText(s) {
+    if (s.within_expert_range == null) return null;
+    return coach.el("span", { class: s.within_expert_range ? "seg-within" : "seg-outside",
+      text: s.within_expert_range ? "within the expert's range" : "outside the expert's range at " + s.outside_bones.slice(0, 3).join(", ") });
+  }
   function buildSegments() {
     const box = $("segment-cards");
     box.textContent = "";
@@ -351,6 +370,7 @@
         coach.el("span", { class: "score", text: deg(s.score != null ? s.score : s.mean_error_deg) }),
         coach.el("span", { class: "muted", text: "frames " + s.performer_start + "–" + s.performer_end }),
         coach.el("span", { text: tempoText(s.tempo_ratio) }),
+        rangeText(s),  // null (skipped) for a reference from one take
         coach.el("ul", {}, s.worst_bones.map(function (wb) { return coach.el("li", { text: wb[0] + ": " + deg(wb[1]) + spread(wb[2]) }); })),
         warn,  // null (skipped) where the video agrees
       ]);

@@ -6,22 +6,27 @@
   const BONES = JSON.parse(listEl.dataset.bones);
   const form = document.getElementById("ref-upload");
   const err = document.getElementById("ref-error");
+  const done = document.getElementById("ref-done");
 
   form.addEventListener("submit", async function (ev) {
     ev.preventDefault();
-    err.hidden = true;
+    err.hidden = true; done.hidden = true;
     const data = new FormData();
-    const f = document.getElementById("ref-file").files[0];
-    if (!f) { err.textContent = "Choose a BVH file."; err.hidden = false; return; }
-    data.append("file", f, f.name);
+    const files = Array.from(document.getElementById("ref-file").files);
+    if (!files.length) { err.textContent = "Choose a BVH file."; err.hidden = false; return; }
+    const d = document.getElementById("ref-domain").files[0];
+    const takes = files.length > 1;  // several takes of one action: a reference from takes
+    if (takes && d) { err.textContent = "A domain file goes with one BVH; a reference from takes gets its own. Set segment names after the upload."; err.hidden = false; return; }
+    files.forEach(function (f) { data.append(takes ? "takes" : "file", f, f.name); });
     const name = document.getElementById("ref-name").value.trim();
     if (name) data.append("name", name);
-    const d = document.getElementById("ref-domain").files[0];
     if (d) data.append("domain", d, d.name);
     const button = form.querySelector("button[type=submit]");
-    button.disabled = true; button.textContent = "Importing…";
+    button.disabled = true; button.textContent = takes ? "Synchronising " + files.length + " takes…" : "Importing…";
     try {
-      await coach.api("/api/v1/references", { method: "POST", body: data });
+      const r = await coach.api(takes ? "/api/v1/references/takes" : "/api/v1/references", { method: "POST", body: data });
+      done.textContent = "Added “" + r.name + "”: " + r.frames + " frames" + (takes ? ", from " + r.derived.takes.kept.length + " takes." : ".");
+      done.hidden = false;
       form.reset();
       await load();
     } catch (e) { err.textContent = e.message; err.hidden = false; }
@@ -34,6 +39,22 @@
     if (map[name] != null) return map[name];
     if (map[child] != null) return map[child];
     return dflt;
+  }
+
+  // A reference built from several takes: which takes, the median, what was left out, the
+  // synchronisation plot and the expert's spread per bone (mean and largest over the frames).
+  function takesInfo(r) {
+    const t = (r.derived || {}).takes;
+    if (!t) return null;
+    const rows = Object.keys(t.bone_sd_deg_mean).sort(function (a, b) { return t.bone_sd_deg_mean[b] - t.bone_sd_deg_mean[a]; })
+      .map(function (b) { return coach.el("tr", {}, [coach.el("td", { text: b }), coach.el("td", { text: t.bone_sd_deg_mean[b].toFixed(1) + "°" }), coach.el("td", { text: t.bone_sd_deg_max[b].toFixed(1) + "°" })]); });
+    return coach.el("div", { class: "takes" }, [
+      coach.el("p", { text: "Built from " + t.kept.length + " takes (" + t.kept.join(", ") + "); time pattern: the median take " + t.median_take + "." }),
+      t.warnings.length ? coach.el("ul", { class: "error" }, t.warnings.map(function (w) { return coach.el("li", { text: w }); })) : null,
+      coach.el("img", { src: r.takes_plot, class: "takes-plot", alt: "The takes of " + r.name + " before and after synchronisation, and their mean with three standard deviations" }),
+      coach.el("details", {}, [coach.el("summary", { text: "The expert's own variation per bone" }),
+        coach.el("table", { class: "spread" }, [coach.el("thead", {}, [coach.el("tr", {}, [coach.el("th", { text: "Bone" }), coach.el("th", { text: "Mean spread" }), coach.el("th", { text: "Largest" })])]), coach.el("tbody", {}, rows)])]),
+    ]);
   }
 
   function card(r) {
@@ -77,6 +98,7 @@
       coach.el("h2", { id: id + "-h", text: r.name }),
       coach.el("p", { class: "muted", text: (r.frames || "?") + " frames at " + (r.fps ? r.fps.toFixed(1) : "?") + " fps · " + (r.duration_s ? r.duration_s.toFixed(1) + " s" : "") }),
       coach.el("img", { src: r.strip, alt: "Postures of " + r.name + " at its segment boundaries" }),
+      takesInfo(r),  // null (skipped) for a reference from one BVH
       f,
     ]);
   }

@@ -100,9 +100,7 @@ async def create_reference(
         label = name or (Path(file.filename or "").stem[:200] or "reference")
         ref = crud.create_reference(session, club_id=who.club.id, name=label)
         final_dir = storage.reference_dir(ref.id)
-        ref.bvh_path = str(storage.move(bvh, final_dir / "reference.bvh"))
-        ref.domain_config = domain_config
-        ref.derived = derived
+        _store(ref, bvh, final_dir, domain_config, derived)
         session.commit()
         response.headers["Location"] = location(request, "read_reference", reference_id=ref.id)
         return ref
@@ -112,6 +110,96 @@ async def create_reference(
         raise
     finally:
         Storage.remove(tmp)
+
+
+def _store(ref, bvh: Path, final_dir: Path, domain_config, derived) -> None:
+    """Move an accepted reference's files into its folder and record what was derived."""
+    ref.bvh_path = str(Storage.move(bvh, final_dir / "reference.bvh"))
+    for extra in ("takes.png",):  # what a reference built from takes also has
+        if (bvh.parent / extra).exists():
+            Storage.move(bvh.parent / extra, final_dir / extra)
+    ref.domain_config = domain_config
+    ref.derived = derived
+
+
+@router.post(
+    "/takes",
+    status_code=201,
+    response_model=ReferencePublic,
+    summary="Build a reference from several takes of one action (seed 002)",
+    description=(
+        "Two or more BVH takes of one action (`takes`, one file each) are synchronised to "
+        "their median take; the reference is their mean performance, on the median take's "
+        "frames, and its domain keeps the expert's spread of every bone at every frame "
+        "(`variation`), so that every analysis against it also says whether an error lies "
+        "within the expert's own take-to-take variation. A take far from the others (another "
+        "action, a failed capture) is left out and named in `derived.takes.warnings`; fewer "
+        "than two takes of one action left, a file that is not a mappable BVH or over the "
+        "limits, or more than `COACH_MAX_REFERENCE_TAKES` takes are refused with 422 "
+        "`invalid_reference`. `thumbnail`, `strip` and `takes.png` show the result."
+    ),
+    responses=CREATED | errors(413, 422),
+)
+async def create_reference_from_takes(
+    request: Request,
+    response: Response,
+    who: CurrentCoach,
+    session: SessionDep,
+    settings: SettingsDep,
+    storage: StorageDep,
+    takes: Annotated[list[UploadFile], File(description="Two or more BVH takes of one action.")],
+    name: Annotated[str | None, Form(min_length=1, max_length=200)] = None,
+    sport: Annotated[str, Form(max_length=40)] = "",
+):
+    if not 2 <= len(takes) <= settings.max_reference_takes:
+        raise ApiError(
+            422, "invalid_reference",
+            f"give 2 to {settings.max_reference_takes} takes of one action, got {len(takes)}",
+        )  # fmt: skip
+    tmp = storage.new_tmp_dir()
+    final_dir: Path | None = None
+    try:
+        paths = []
+        for i, f in enumerate(takes):
+            paths.append(tmp / f"take_{i}.bvh")
+            try:
+                await storage.receive(f, paths[-1], settings.max_bvh_bytes)
+            except UploadTooLarge as exc:
+                raise too_large(f"take {i + 1}", exc.limit) from None
+        names = [Path(f.filename or "").stem[:60] or f"take {i + 1}" for i, f in enumerate(takes)]
+        # Reading, synchronising every pair and the plot take 1-5 s: off the event loop.
+        try:
+            domain_config, derived = await run_in_threadpool(
+                validation.build_from_takes, paths, names, tmp, settings, sport
+            )
+        except InvalidInput as exc:
+            raise ApiError(422, "invalid_reference", str(exc)) from None
+        label = name or ("takes " + ", ".join(derived["takes"]["kept"]))[:200]
+        ref = crud.create_reference(session, club_id=who.club.id, name=label)
+        final_dir = storage.reference_dir(ref.id)
+        _store(ref, tmp / "reference.bvh", final_dir, domain_config, derived)
+        session.commit()
+        response.headers["Location"] = location(request, "read_reference", reference_id=ref.id)
+        return ref
+    except BaseException:
+        session.rollback()
+        Storage.remove(final_dir)
+        raise
+    finally:
+        Storage.remove(tmp)
+
+
+@router.get(
+    "/{reference_id}/takes.png",
+    summary="A reference built from takes: the takes before and after synchronisation",
+    responses={200: {"content": {"image/png": {}}}} | errors(404),
+)  # fmt: skip
+def reference_takes_plot(reference_id: DbId, who: CurrentPrincipal, session: SessionDep):
+    ref = reference_for(session, who, reference_id)
+    path = Path(ref.bvh_path).with_name("takes.png")
+    if not path.is_file():
+        raise ApiError(404, "not_found", f"reference {reference_id} was not built from takes")
+    return Response(path.read_bytes(), media_type="image/png", headers=_PICTURE_HEADERS)
 
 
 @router.get("", response_model=ReferencesPublic, summary="The club's references")
