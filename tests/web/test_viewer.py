@@ -123,3 +123,33 @@ def test_scene_shows_what_the_video_suggests_in_misfit_frames(server, analysis):
         assert np.ptp(scene.handles["image_best"].points, axis=-2).max() == 0
     finally:
         scene.close()
+
+
+def test_against_a_reference_from_takes_the_colours_switch_to_the_experts_range(server, analysis):
+    """The arm is 30 deg off in segment 2: red in degrees, but green where the expert's own
+    takes vary by 20 deg there (z = 1.5 < 3)."""
+    ref, doc = analysis
+    for f in doc["frames"]:
+        f["bone_z"] = [e / 20.0 for e in f["bone_errors_deg"]]
+    doc["domain"] = {"variation": {"z_limit": 3.0}}
+    scene = build_scene(server, ref, doc)
+    try:
+        scene.set_frame(8)
+        by_deg = scene.handles["performer"].colors.copy()
+        scene.handles["colour_by"].value = "expert's range"
+        scene.set_frame(8)
+        by_z = scene.handles["performer"].colors
+        assert scene.z_limit == 3.0
+        assert by_z[12, 0, 1] > by_deg[12, 0, 1]  # r_shoulder->r_elbow: greener by z
+        assert by_z[12, 0, 0] <= by_deg[12, 0, 0]
+    finally:
+        scene.close()
+
+
+def test_a_result_without_the_experts_range_has_no_colour_switch(server, analysis):
+    ref, doc = analysis
+    scene = build_scene(server, ref, doc)
+    try:
+        assert "colour_by" not in scene.handles
+    finally:
+        scene.close()

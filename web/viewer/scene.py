@@ -56,18 +56,26 @@ def _rgb_pairs(rgb01: np.ndarray) -> np.ndarray:
     return np.repeat(c[:, None], 2, 1)
 
 
-def bone_colours(frame: ResultFrame | Mapping[str, Any]) -> np.ndarray:
+def bone_colours(
+    frame: ResultFrame | Mapping[str, Any], *, z_limit: float | None = None
+) -> np.ndarray:
     """Per-bone colours (16, 3) in [0, 1] of a result frame: the error's colour, washed out
     towards grey as the bone's range over the candidates the video cannot tell apart
     (``bone_error_range_deg``) widens, fully at ``ERROR_RED_DEG`` (x 0.7): a bright red bone
     is a sure fault, a pale one a guess about depth.
 
+    With ``z_limit`` (a reference built from takes), the colour says how far the bone is
+    outside the expert's own variation instead: red at ``bone_z = z_limit``.
+
     ``frame`` is a :class:`~engine.io.result_reader.ResultFrame` or a mapping with
-    ``bone_errors_deg`` and, optionally, ``bone_error_range_deg``."""
+    ``bone_errors_deg`` and, optionally, ``bone_error_range_deg`` and ``bone_z``."""
     if isinstance(frame, ResultFrame):
-        errors, rng = frame.bone_errors_deg, frame.bone_error_range_deg
+        errors, rng, z = frame.bone_errors_deg, frame.bone_error_range_deg, frame.bone_z
     else:
         errors, rng = frame["bone_errors_deg"], frame.get("bone_error_range_deg")
+        z = frame.get("bone_z")
+    if z_limit is not None and z is not None:
+        errors = np.asarray(z, float) * (ERROR_RED_DEG / z_limit)  # z_limit shows as red
     rgb = error_colors(np.asarray(errors, float))
     if rng is None or not len(rng):
         return rgb
@@ -93,8 +101,11 @@ class ViewerScene:
     frames: tuple[ResultFrame, ...]
     fps: float
     segments: tuple[ResultSegment, ...] = ()
+    result_doc: Mapping[str, Any] = field(default_factory=dict)
     handles: dict[str, Any] = field(default_factory=dict)
     current: int = 0
+    #: Colour bones by the expert's range (red at this z) instead of degrees; None: degrees.
+    z_limit: float | None = None
     _stop: threading.Event = field(default_factory=threading.Event)
     _thread: threading.Thread | None = None
 
@@ -119,7 +130,7 @@ class ViewerScene:
         with self.server.atomic():
             h["reference"].points = _segments_of(ref).astype(np.float32)
             h["performer"].points = _segments_of(sel).astype(np.float32)
-            h["performer"].colors = _rgb_pairs(bone_colours(f))
+            h["performer"].colors = _rgb_pairs(bone_colours(f, z_limit=self.z_limit))
             if len(others):
                 h["candidates"].points = _segments_of(others).reshape(-1, 2, 3).astype(np.float32)
             else:
@@ -225,7 +236,8 @@ def build_scene(
     result = as_result(result)
     if not result.frames:
         raise ValueError("result: no frames to show")
-    scene = ViewerScene(server, ref, result.frames, result.video.fps, result.segments)
+    scene = ViewerScene(server, ref, result.frames, result.video.fps, result.segments,
+                        result_doc=result.doc)  # fmt: skip
     server.scene.set_up_direction("+y")
     look_at, position, floor = frame_body(scene)
     server.scene.add_grid(
@@ -273,6 +285,20 @@ def _add_gui(scene: ViewerScene) -> None:
     @show.on_update
     def _(_event: Any) -> None:
         h["candidates"].visible = bool(show.value)
+
+    if all(f.bone_z is not None for f in scene.frames):  # a reference built from takes
+        limit = float(((scene.result_doc.get("domain") or {}).get("variation") or {})
+                      .get("z_limit", 3.0))  # fmt: skip
+        by = server.gui.add_dropdown(
+            "colour by", ("degrees", "expert's range"), initial_value="degrees",
+            hint=f"expert's range: red where a bone is {limit:g} times the expert's own spread",
+        )  # fmt: skip
+        h["colour_by"] = by
+
+        @by.on_update
+        def _(_event: Any) -> None:
+            scene.z_limit = limit if by.value == "expert's range" else None
+            scene.set_frame(scene.current)
 
     t_to_i = {f.t: i for i, f in enumerate(scene.frames)}
     with server.gui.add_folder("segments"):

@@ -1,0 +1,62 @@
+"""References from several takes in the browser: the upload, the card, and an analysis
+page that says where the performer is within or outside the expert's own range."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from tests.browser.conftest import COACH, sign_in
+from tests.browser.test_pages_browser import wait_results
+from tests.conftest import CMU
+
+pytestmark = pytest.mark.browser
+
+
+def test_a_coach_builds_a_reference_from_two_takes(server, browser, shots):
+    for n in ("64_29", "64_30"):
+        if not (CMU / f"{n}.bvh").exists():
+            pytest.skip("../shared/data/cmu is not beside the clone")
+    page = browser.new_context(viewport={"width": 1280, "height": 900}).new_page()
+    sign_in(page, server.url, COACH[0], COACH[1], next_path="/references")
+    page.wait_for_selector("#ref-list")
+    before = page.locator(".ref-card").count()
+    page.locator("#ref-upload").get_by_label("Name", exact=True).fill("Bend, two takes")
+    page.get_by_label("BVH file").set_input_files([str(CMU / "64_29.bvh"), str(CMU / "64_30.bvh")])
+    page.get_by_role("button", name="Upload reference").click()
+    page.locator("#ref-done").wait_for(timeout=60_000)
+    assert "from 2 takes" in page.locator("#ref-done").inner_text()
+    page.wait_for_function(f"() => document.querySelectorAll('.ref-card').length === {before + 1}")
+    card = page.locator(".ref-card", has_text="Bend, two takes")
+    assert "Built from 2 takes (64_29, 64_30)" in card.inner_text()
+    plot = card.locator("img.takes-plot")
+    page.wait_for_function(
+        "(img) => img.complete && img.naturalWidth > 300", arg=plot.element_handle()
+    )
+    card.get_by_text("The expert's own variation per bone").click()
+    assert card.locator("table.spread tbody tr").count() == 16
+    page.screenshot(path=str(shots / "reference-from-takes.png"), full_page=True)
+
+
+def test_the_analysis_page_shows_the_experts_range(server, browser, clip, clip_result, shots):
+    result = json.loads(json.dumps(clip_result))
+    for i, f in enumerate(result["frames"]):
+        f["expert_spread_deg"] = 6.0
+        f["bone_z"] = [e / 6.0 for e in f["bone_errors_deg"]]
+        f["outside_expert_range"] = max(f["bone_z"]) > 3
+    for j, s in enumerate(result["segments"]):
+        s["within_expert_range"] = j != 0
+        s["outside_bones"] = [] if j else ["r_shoulder->r_elbow"]
+        s["bone_mean_z"] = [e / 6.0 for e in s["bone_mean_errors_deg"]]
+    aid = server.add_done_analysis("pat", clip, result)
+    page = browser.new_context(viewport={"width": 1280, "height": 1000}).new_page()
+    sign_in(page, server.url, "pat@example.com", next_path=f"/analyses/{aid}")
+    wait_results(page)
+    assert page.locator("#plot-svg polygon.expert-band").count() == 1
+    assert "expert's own variation" in page.locator("#plot-svg").inner_html()
+    cards = page.locator(".seg-card")
+    assert "outside the expert's range at r_shoulder->r_elbow" in cards.first.inner_text()
+    if cards.count() > 1:
+        assert "within the expert's range" in cards.nth(1).inner_text()
+    page.screenshot(path=str(shots / "analysis-expert-range.png"), full_page=True)
