@@ -146,11 +146,11 @@ def run_real(files: list[str], events, band: float, plot_dir: Path | None) -> No
             print(f"  {k}: spread over the takes {max(lin) - min(lin)} frames linear, "
                   f"{max(syn) - min(syn)} synchronised")  # fmt: skip
         if plot_dir is not None and mu is None:
-            from engine.commands.reference_build import plot
+            from engine.reference.takes_plot import plot_takes
 
             plot_dir.mkdir(parents=True, exist_ok=True)
             path = plot_dir / f"sync_{Path(files[0]).stem}.png"
-            plot(model, path)
+            plot_takes(model, path)
             print(f"  plot {path}")
 
 

@@ -41,7 +41,7 @@ def test_a_coach_builds_a_reference_from_two_takes(server, browser, shots):
 
 def test_the_analysis_page_shows_the_experts_range(server, browser, clip, clip_result, shots):
     result = json.loads(json.dumps(clip_result))
-    for i, f in enumerate(result["frames"]):
+    for f in result["frames"]:
         f["expert_spread_deg"] = 6.0
         f["bone_z"] = [e / 6.0 for e in f["bone_errors_deg"]]
         f["outside_expert_range"] = max(f["bone_z"]) > 3

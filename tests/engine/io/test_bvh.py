@@ -168,6 +168,25 @@ def test_write_round_trip_cmu(cmu_ref, tmp_path):
     assert ref.motion.first_motion_frame == 1
 
 
+def test_write_keeps_bones_a_rigid_hip_and_chest_cannot_hold(cmu_ref, tmp_path):
+    """A CMU spine bends at the pelvis, which the rigid hip part cannot reproduce: each such
+    bone gets a zero-length joint of its own, so every bone direction comes back exactly."""
+    from engine.measures import bone_angles
+
+    J = cmu_ref.motion.joints  # the file's own bones, not resampled onto a rigid body
+    path = write_bvh(tmp_path / "n.bvh", J, 120.0, cmu_ref.shape)
+    back = load_reference(path)
+    assert np.degrees(bone_angles(back.motion.joints, J)).max() < 1e-3
+    assert "JOINT hip_to_lower_chest" in path.read_text()
+    assert back.profile == "coach" and back.motion.first_motion_frame == 1
+
+
+def test_write_of_rigid_postures_has_only_the_17_joints(rng, tmp_path):
+    shape = BodyShape.default(1.7)
+    text = write_bvh(tmp_path / "r.bvh", random_postures(rng, shape, 5), 30.0, shape).read_text()
+    assert text.count("JOINT ") + text.count("ROOT ") == 17
+
+
 def test_write_validates(tmp_path):
     with pytest.raises(InvalidInput, match=r"shape \(T, 17, 3\)"):
         write_bvh(tmp_path / "a.bvh", np.zeros((3, 16, 3)), 30.0)
