@@ -15,7 +15,6 @@ import numpy as np
 
 from engine.body.skeleton import JOINTS
 from engine.commands import reference_build
-from engine.errors import InvalidInput
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -112,6 +111,7 @@ def plot(ref, seg, joint: str, threshold_deg: float, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from engine.io.figures import save_figure
     from engine.reference.boundaries import direction_change
 
     m = ref.motion
@@ -136,9 +136,4 @@ def plot(ref, seg, joint: str, threshold_deg: float, path: Path) -> None:
     for s in seg.starts[1:]:
         ax2.annotate(f"{s}", (s, 170), ha="left", va="top", fontsize=8)
     ax2.legend(loc="upper left", fontsize=8)
-    try:
-        fig.savefig(path, dpi=100)
-    except OSError as exc:
-        raise InvalidInput(f"cannot write plot {path}: {exc.strerror or exc}") from None
-    finally:
-        plt.close(fig)
+    save_figure(fig, path, dpi=100)

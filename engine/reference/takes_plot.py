@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from engine.errors import InvalidInput
+from engine.io.figures import save_figure
 from engine.reference.action_model import ActionModel
 
 
@@ -41,9 +41,4 @@ def plot_takes(model: ActionModel, path: Path) -> None:
     axes[1, 0].set_ylabel("synchronised to the median")
     axes[2, 0].set_ylabel("mean +- 3 sd")
     axes[0, 0].legend(fontsize=7)
-    try:
-        fig.savefig(path, dpi=90)
-    except OSError as exc:
-        raise InvalidInput(f"cannot write plot {path}: {exc.strerror or exc}") from None
-    finally:
-        plt.close(fig)
+    save_figure(fig, path, dpi=90)

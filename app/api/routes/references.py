@@ -68,7 +68,6 @@ async def create_reference(
     domain: Annotated[UploadFile | None, File(description="Domain configuration JSON.")] = None,
 ):
     tmp = storage.new_tmp_dir()
-    final_dir: Path | None = None
     try:
         bvh = tmp / "reference.bvh"
         try:
@@ -98,28 +97,31 @@ async def create_reference(
         except InvalidInput as exc:
             raise ApiError(422, "invalid_reference", str(exc)) from None
         label = name or (Path(file.filename or "").stem[:200] or "reference")
+        ref = _add(session, who, storage, label, bvh, domain_config, derived)
+        response.headers["Location"] = location(request, "read_reference", reference_id=ref.id)
+        return ref
+    finally:
+        Storage.remove(tmp)
+
+
+def _add(session, who, storage: Storage, label: str, bvh: Path, domain_config, derived):
+    """Record an accepted reference and move its files (``bvh`` and, for one built from
+    takes, the ``takes.png`` beside it) into its folder; nothing is left of it on failure."""
+    final_dir: Path | None = None
+    try:
         ref = crud.create_reference(session, club_id=who.club.id, name=label)
         final_dir = storage.reference_dir(ref.id)
-        _store(ref, bvh, final_dir, domain_config, derived)
+        ref.bvh_path = str(Storage.move(bvh, final_dir / "reference.bvh"))
+        if (bvh.parent / "takes.png").exists():
+            Storage.move(bvh.parent / "takes.png", final_dir / "takes.png")
+        ref.domain_config = domain_config
+        ref.derived = derived
         session.commit()
-        response.headers["Location"] = location(request, "read_reference", reference_id=ref.id)
         return ref
     except BaseException:
         session.rollback()
         Storage.remove(final_dir)
         raise
-    finally:
-        Storage.remove(tmp)
-
-
-def _store(ref, bvh: Path, final_dir: Path, domain_config, derived) -> None:
-    """Move an accepted reference's files into its folder and record what was derived."""
-    ref.bvh_path = str(Storage.move(bvh, final_dir / "reference.bvh"))
-    for extra in ("takes.png",):  # what a reference built from takes also has
-        if (bvh.parent / extra).exists():
-            Storage.move(bvh.parent / extra, final_dir / extra)
-    ref.domain_config = domain_config
-    ref.derived = derived
 
 
 @router.post(
@@ -157,7 +159,6 @@ async def create_reference_from_takes(
             f"give 2 to {settings.max_reference_takes} takes of one action, got {len(takes)}",
         )  # fmt: skip
     tmp = storage.new_tmp_dir()
-    final_dir: Path | None = None
     try:
         paths = []
         for i, f in enumerate(takes):
@@ -175,16 +176,9 @@ async def create_reference_from_takes(
         except InvalidInput as exc:
             raise ApiError(422, "invalid_reference", str(exc)) from None
         label = name or ("takes " + ", ".join(derived["takes"]["kept"]))[:200]
-        ref = crud.create_reference(session, club_id=who.club.id, name=label)
-        final_dir = storage.reference_dir(ref.id)
-        _store(ref, tmp / "reference.bvh", final_dir, domain_config, derived)
-        session.commit()
+        ref = _add(session, who, storage, label, tmp / "reference.bvh", domain_config, derived)
         response.headers["Location"] = location(request, "read_reference", reference_id=ref.id)
         return ref
-    except BaseException:
-        session.rollback()
-        Storage.remove(final_dir)
-        raise
     finally:
         Storage.remove(tmp)
 
