@@ -16,9 +16,11 @@ disparity, which is the point of seed 002.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import solveh_banded
 
 from engine.errors import InvalidInput
 
@@ -46,11 +48,15 @@ class Synchronisation:
     distance: float
     cost: float
     mu: float
+    refined: np.ndarray | None = None
 
     @property
     def positions(self) -> np.ndarray:
-        """(P,) fractional frame of the original ``m`` shown at each pattern frame (eq. 18
-        composed with eq. 7): what :func:`warp` samples."""
+        """(P,) fractional frame of the original ``m`` shown at each pattern frame: the
+        refined warp when there is one, else eq. 18 composed with eq. 7. What :func:`warp`
+        samples."""
+        if self.refined is not None:
+            return self.refined
         p = np.arange(len(self.disparity), dtype=float)
         return (p + self.disparity) * self.alpha
 
@@ -146,7 +152,12 @@ def optimal_disparity(E: np.ndarray, mu: float) -> tuple[np.ndarray, float]:
 
 
 def synchronise(
-    xn: np.ndarray, xm: np.ndarray, *, mu: float | None = None, band: float = 0.25
+    xn: np.ndarray,
+    xm: np.ndarray,
+    *,
+    mu: float | None = None,
+    band: float = 0.1,
+    refine: bool = True,
 ) -> Synchronisation:
     """Synchronise take ``m`` to pattern ``n`` (seed 002 section 3).
 
@@ -160,6 +171,9 @@ def synchronise(
         Smoothness weight (eq. 12); eq. 20's rule of thumb when None; 0 gives DTW.
     band : float
         Largest disparity D as a share of P: the DSI's ``-D <= d <= D`` (section 3).
+    refine : bool
+        Follow the DP with :func:`refine_warp` (sub-frame, curvature-penalised; not with
+        ``mu = 0``, which stays plain DTW).
     """
     xn, xm = np.asarray(xn, dtype=float), np.asarray(xm, dtype=float)
     if xn.ndim != 2 or xm.ndim != 2 or xn.shape[1] != xm.shape[1]:
@@ -175,9 +189,70 @@ def synchronise(
         raise InvalidInput(f"mu must be >= 0, got {mu}")
     d, total = optimal_disparity(E, mu)
     cost = float(E[np.arange(P), d + E.shape[1] // 2].sum())
-    return Synchronisation(
+    sync = Synchronisation(
         disparity=d, alpha=(len(xm) - 1.0) / (P - 1.0), distance=total / P, cost=cost / P, mu=mu
     )
+    if refine and mu > 0:
+        sync = dataclasses.replace(sync, refined=refine_warp(xn, xm, sync.positions, 10.0 * mu))
+    return sync
+
+
+def refine_warp(
+    xn: np.ndarray, xm: np.ndarray, positions: np.ndarray, weight: float, iterations: int = 20
+) -> np.ndarray:
+    """A sub-frame warp near the DP's: minimise ``sum |xn(p) - xm(tau(p))|^2 + weight sum
+    |tau(p+1) - 2 tau(p) + tau(p-1)|^2`` by Gauss-Newton from ``positions``.
+
+    Beyond seed 002: its penalty on ``|d(i+1) - d(i)|`` charges every change of disparity,
+    so the DP cuts the corners of a warp whose rate varies and steps in whole frames (1.1-2.5
+    frames off on warped golf swings, against 0.9 for DTW). Penalising the warp's curvature
+    instead costs a smoothly varying rate nothing; started from the DP path, which is
+    robust, it lands on the true warp (0.2-0.4 frames on the same swings, benchmarks/README).
+    Where the posture does not move the data term vanishes and the warp is interpolated.
+
+    Parameters
+    ----------
+    xn : ndarray, shape (P, b)
+    xm : ndarray, shape (F_m, b)
+    positions : ndarray, shape (P,)
+        Start: fractional frames of ``xm`` (:attr:`Synchronisation.positions`).
+    weight : float
+        Of the curvature term, in units of the squared distance (10 x eq. 20's mu).
+
+    Returns
+    -------
+    tau : ndarray, shape (P,)
+        Non-decreasing, from 0 to F_m - 1 (eq. 9).
+    """
+    P, last = len(xn), len(xm) - 1.0
+    tau = np.asarray(positions, dtype=float).copy()
+    if P < 3:
+        return tau
+    # D2^T D2 (pentadiagonal) as the upper bands solveh_banded takes: rows are the 2nd, 1st
+    # and main diagonals
+    curv = np.zeros((3, P))
+    curv[0, 2:] = 1.0
+    curv[1, 1:] = -4.0
+    curv[1, [1, -1]] = -2.0
+    curv[2] = 6.0
+    curv[2, [0, -1]] = 1.0
+    curv[2, [1, -2]] = 5.0
+    slope = np.gradient(xm, axis=0)  # (F_m, b) d xm / d frame
+    for _ in range(iterations):
+        g = interpolate(slope, tau)  # (P, b)
+        r = interpolate(xm, tau) - xn
+        bands = weight * curv
+        bands[2] += (g * g).sum(1) + 1e-9
+        d2 = np.diff(tau, 2)
+        Ltau = np.zeros(P)
+        Ltau[:-2] += d2
+        Ltau[1:-1] -= 2.0 * d2
+        Ltau[2:] += d2
+        rhs = -(g * r).sum(1) - weight * Ltau
+        step = np.clip(solveh_banded(bands, rhs), -1.0, 1.0)  # linearisation holds a frame
+        tau = np.maximum.accumulate(np.clip(tau + step, 0.0, last))
+        tau[0], tau[-1] = 0.0, last
+    return tau
 
 
 def warp(x: np.ndarray, sync: Synchronisation) -> np.ndarray:
