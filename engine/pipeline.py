@@ -25,7 +25,7 @@ import numpy as np
 from engine.body.shapes import BodyShape
 from engine.errors import InvalidInput
 from engine.io.bvh import Reference, load_reference
-from engine.io.result import build_result
+from engine.io.result import add_expert_2d, build_result
 from engine.io.video import Video, read_video
 from engine.reference.domain import Domain, check_variation, parse_domain, reference_segments
 from engine.render.camera import Camera
@@ -219,6 +219,7 @@ def select(
     add_image_best(doc, cands, d_s, camera)
     add_uncertainty(doc, cands, d_s, prepared.reference_joints[selection.C],
                     sel_settings.uncertainty_margin)  # fmt: skip
+    add_expert_2d(doc, prepared.reference_joints[selection.C], selection.joints, camera)
     chosen = np.stack([c[int(k)] for c, k in zip(cands, selection.selected, strict=True)])
     assess_fit(doc, chosen, prepared, sel_settings)
     note_repetitions(doc, prepared.repetitions)

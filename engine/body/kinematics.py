@@ -152,6 +152,26 @@ def part_rotations(joints: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     return out
 
 
+def facing_turn(joints: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """The turn about the vertical, radians, that best lays the bones of ``joints`` on those
+    of ``target`` (least squares over the bones, closed form; positive as :func:`rot_y`).
+
+    Parameters
+    ----------
+    joints, target : ndarray, shape (..., F, 17, 3)
+        The turn is found over the last two axes' bones together, per leading index: pass
+        (F, 17, 3) for one turn over F frames, (F, 1, 17, 3) for one per frame.
+
+    Returns
+    -------
+    angle : ndarray, shape (...)
+    """
+    a, b = bone_directions(joints), bone_directions(target)
+    num = (a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]).sum((-1, -2))
+    den = (a[..., 0] * b[..., 0] + a[..., 2] * b[..., 2]).sum((-1, -2))
+    return np.arctan2(num, den)
+
+
 def rotation_about_axis(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
     """Rodrigues rotation, axis (..., 3) (normalised here), angle (...) radians -> (..., 3, 3)."""
     axis = np.asarray(axis, dtype=float)

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from engine.body.kinematics import facing_turn, rot_y
 from engine.body.skeleton import BONE_NAMES, JOINTS
 from engine.errors import InvalidInput
 from engine.render.camera import Camera
@@ -179,6 +180,31 @@ def _segment_doc(
     if domain is not None:
         seg["score_deg"] = float(np.round(np.degrees(domain.score(s.bone_mean_errors)), 3))
     return seg
+
+
+def add_expert_2d(
+    doc: dict[str, Any], expert: np.ndarray, selected: np.ndarray, camera: Camera
+) -> None:
+    """``frames[i].expert_joints_2d``: the expert's posture at C(t') drawn where the performer
+    stands in the video (a SimulCam-style ghost). It is turned about the vertical onto the
+    selected posture (least squares over its bones) and moved to its hip, then projected with
+    the video's camera, so what differs is the posture, not where the body faces.
+
+    Parameters
+    ----------
+    expert : ndarray, shape (T', 17, 3)
+        The reference at each frame's ``reference_frame``.
+    selected : ndarray, shape (T', 17, 3)
+        The selected postures (``joints_3d``).
+    camera : Camera
+        At the video's own size.
+    """
+    expert, selected = np.asarray(expert, float), np.asarray(selected, float)
+    turn = facing_turn(expert[:, None], selected[:, None])  # (T',) one turn per frame
+    hip = expert[:, :1]
+    placed = np.einsum("tij,tkj->tki", rot_y(turn), expert - hip) + selected[:, :1]
+    for f, uv in zip(doc["frames"], camera.project(placed), strict=True):
+        f["expert_joints_2d"] = _r(uv, 2)
 
 
 def add_variation(

@@ -93,6 +93,8 @@ class ResultFrame:
     takes only). Shape (16,)."""
     outside_expert_range: bool | None = None
     expert_spread_deg: float | None = None
+    expert_joints_2d: np.ndarray | None = None
+    """The expert's posture at C(t') where the performer stands, video pixels. Shape (17, 2)."""
     """Mean spread of the expert's bones at C(t') (floored), degrees."""
     image_best: int | None = None
     """In ``image_misfit`` frames: index of the candidate that fits the video best."""
@@ -363,6 +365,7 @@ def _frame(v: Any, where: str) -> ResultFrame:
         bone_z=_opt_array(m, "bone_z", (N_BONES,), where),
         outside_expert_range=_opt(m, "outside_expert_range", where, _bool),
         expert_spread_deg=_opt(m, "expert_spread_deg", where, _num),
+        expert_joints_2d=_opt_array(m, "expert_joints_2d", (N_JOINTS, 2), where),
     )
 
 

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from engine.body.kinematics import bone_directions, joints_from_bones, rot_y
+from engine.body.kinematics import bone_directions, facing_turn, joints_from_bones, rot_y
 from engine.body.shapes import BodyShape
 from engine.body.skeleton import BONE_NAMES
 from engine.errors import InvalidInput
@@ -247,7 +247,7 @@ def build_action_model(takes: Sequence[Take], settings: TakesSettings | None = N
             for i in range(len(takes))
         )
         warped = [warp(j, sy) for j, sy in zip(joints, syncs, strict=True)]
-        warped = [w @ rot_y(facing(w, warped[median])).T for w in warped]
+        warped = [w @ rot_y(float(facing_turn(w, warped[median]))).T for w in warped]
         far = _far_takes(warped, median, kept, s)
         if not far:
             break
@@ -273,16 +273,6 @@ def build_action_model(takes: Sequence[Take], settings: TakesSettings | None = N
         mean_x=mean_x, sd_x=np.sqrt(((xs - mean_x) ** 2).mean(0)),
         direction=motion_direction(mean_x, s.window), tpose=takes[median].tpose,
     )  # fmt: skip
-
-
-def facing(joints: np.ndarray, target: np.ndarray) -> float:
-    """The turn about the vertical, radians, that best lays the bones of ``joints`` (P, 17, 3)
-    on those of ``target`` (least squares over every bone and frame, closed form): takes of
-    one swing are compared in the expert's own facing, not in the file's world frame."""
-    a, b = bone_directions(joints), bone_directions(target)
-    num = (a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]).sum()
-    den = (a[..., 0] * b[..., 0] + a[..., 2] * b[..., 2]).sum()
-    return float(np.arctan2(num, den))
 
 
 def load_takes(

@@ -60,3 +60,43 @@ def test_the_analysis_page_shows_the_experts_range(server, browser, clip, clip_r
     if cards.count() > 1:
         assert "within the expert's range" in cards.nth(1).inner_text()
     page.screenshot(path=str(shots / "analysis-expert-range.png"), full_page=True)
+
+
+def test_the_expert_drawn_over_the_video_slow_motion_and_loop(
+    server, browser, clip, clip_result, shots
+):
+    """The 'Expert' toggle draws the expert's skeleton where the performer stands; the speed
+    select slows the video; the segment loop brings playback back to the segment's start."""
+    import numpy as np
+
+    assert all(f.get("expert_joints_2d") for f in clip_result["frames"])
+    aid = server.add_done_analysis("pat", clip, clip_result)
+    page = browser.new_context(viewport={"width": 1280, "height": 1000}).new_page()
+    sign_in(page, server.url, "pat@example.com", next_path=f"/analyses/{aid}")
+    wait_results(page)
+
+    def ghost_pixels() -> int:
+        data = page.evaluate("""() => { const c = document.querySelector('#overlay');
+            return Array.from(c.getContext('2d').getImageData(0, 0, c.width, c.height).data); }""")
+        rgba = np.asarray(data, np.int32).reshape(-1, 4)
+        return int((np.abs(rgba[:, :3] - [110, 130, 200]).max(1) <= 25).sum())
+
+    assert page.locator("#expert-toggle").is_visible()
+    page.get_by_role("checkbox", name="Skeleton").uncheck()
+    assert ghost_pixels() == 0
+    page.get_by_role("checkbox", name="Expert").check()
+    assert ghost_pixels() > 50
+    assert page.locator("#legend-expert").is_visible()
+    page.screenshot(path=str(shots / "analysis-expert-ghost.png"), full_page=True)
+    page.get_by_label("Playback speed").select_option("0.25")
+    assert page.evaluate("() => document.getElementById('video').playbackRate") == 0.25
+    first = clip_result["segments"][0]
+    page.get_by_role("checkbox", name="Loop segment").check()
+    page.locator(".seg-card").first.click()
+    page.evaluate("() => { const v = document.getElementById('video'); v.playbackRate = 4; "
+                  "v.play(); }")  # fmt: skip
+    fps = clip_result["video"]["fps"]
+    end_s = (first["performer_end"] + 1) / fps
+    page.wait_for_timeout(int(3000 * end_s / 4) + 1500)
+    t = page.evaluate("() => document.getElementById('video').currentTime")
+    assert t <= end_s + 0.5 / fps, f"played on past the looped segment: {t:.2f} s"

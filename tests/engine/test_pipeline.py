@@ -305,3 +305,18 @@ def test_an_analysis_against_a_reference_from_takes_reports_the_experts_range(ca
     assert share == pytest.approx(np.mean([f["outside_expert_range"] for f in doc["frames"]]))
     assert all(isinstance(s["within_expert_range"], bool) for s in doc["segments"])
     assert doc["domain"]["variation"]["takes"] == ["swing", "w0.3", "w-0.3"]
+
+
+def test_the_expert_is_drawn_where_the_performer_stands(case_dir) -> None:
+    """Where the synthetic performer holds the expert's posture (true error under 2 deg), the
+    expert's projected joints land on the performer's true joints within a few pixels."""
+    import json
+
+    doc = analyze(case_dir["reference"], case_dir["video"], S)
+    truth = {f["t"]: f for f in json.load(open(case_dir["truth"]))["frames"]}
+    same = [f for f in doc["frames"] if truth[f["t"]]["posture_error_deg"] < 2.0]
+    assert len(same) >= 5
+    off = [np.linalg.norm(np.subtract(f["expert_joints_2d"], truth[f["t"]]["joints_2d"]), axis=1)
+           for f in same]  # fmt: skip
+    height = doc["video"]["height"]
+    assert np.median(off) < 0.03 * height  # 3.6 px on 120 rows

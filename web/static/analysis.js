@@ -16,7 +16,8 @@
   const PARENT = [0, 1, 2, 0, 4, 5, 0, 7, 8, 9, 10, 8, 12, 13, 8, 15];
   const CHILD = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16];
   const PALETTE = ["#1971c2", "#9c36b5", "#e67700", "#0c8599", "#5f3dc4", "#d6336c", "#2f9e44", "#495057"];
-  const MISFIT = "#fab005";  // shading of frames the video does not confirm (image_misfit)
+  const MISFIT = "#fab005";
+  const EXPERT_GHOST = "rgba(110,130,200,0.85)";  // the expert in the video, as in the 3D view  // shading of frames the video does not confirm (image_misfit)
   // Degrees for people: one decimal under 10 (a segment at 0.4 deg is not "0 deg").
   function deg(v) { return (Math.abs(v) < 9.95 ? v.toFixed(1) : v.toFixed(0)) + "°"; }
 
@@ -131,6 +132,7 @@
     const anyBest = result.frames.some(function (f) { return f.image_best_joints_2d; });
     $("legend-image-best").hidden = !anyBest;
     $("legend3d-image-best").hidden = !anyBest;
+    $("expert-toggle").hidden = !result.frames.every(function (f) { return f.expert_joints_2d; });
     buildBonePicks(); buildPlot(); buildSegments(); loadComments(); start3d();
     $("plot").setAttribute("aria-valuemax", String(n - 1));
     setFrame(0, true);
@@ -176,6 +178,7 @@
     drawOverlay(); moveCursor(); markSegment(); sync3d();
   }
   function tick() {
+    if (loopSegment()) { requestAnimationFrame(tick); return; }
     setFrame(frameAtTime(video.currentTime));
     if (!video.paused && !video.ended) requestAnimationFrame(tick);
   }
@@ -188,15 +191,35 @@
   $("prev").addEventListener("click", function () { video.pause(); seek(frame - 1); });
   $("next").addEventListener("click", function () { video.pause(); seek(frame + 1); });
   $("show-skeleton").addEventListener("change", drawOverlay);
+  $("show-expert").addEventListener("change", function () { $("legend-expert").hidden = !$("show-expert").checked; drawOverlay(); });
+  $("speed").addEventListener("change", function () { video.playbackRate = +$("speed").value; });
+  // A-B loop over the segment the frame is in: playing past its end starts it again.
+  function loopSegment() {
+    if (!$("loop-segment").checked || !summary || video.paused) return false;
+    const t = frameAtTime(video.currentTime) + first;
+    const seg = summary.segments.find(function (s) { return frame + first >= s.performer_start && frame + first <= s.performer_end; });
+    if (!seg || t <= seg.performer_end) return false;
+    video.currentTime = (seg.performer_start + 0.5) / fps;
+    return true;
+  }
 
   function drawOverlay() {
     const ctx = overlay.getContext("2d");
     ctx.clearRect(0, 0, overlay.width, overlay.height);
-    if (!result || !$("show-skeleton").checked || outside) return;
+    if (!result || outside) return;
     const fr = result.frames[frame];
     const p = fr.joints_2d, e = fr.bone_errors_deg;
     const w = Math.max(2, overlay.height / 80);
     ctx.lineCap = "round";
+    // The expert's posture at the matched reference frame, where the performer stands.
+    const x = $("show-expert").checked && fr.expert_joints_2d;
+    if (x) {
+      ctx.strokeStyle = EXPERT_GHOST; ctx.lineWidth = w * 1.6;
+      for (let b = 0; b < 16; b++) {
+        ctx.beginPath(); ctx.moveTo(x[PARENT[b]][0], x[PARENT[b]][1]); ctx.lineTo(x[CHILD[b]][0], x[CHILD[b]][1]); ctx.stroke();
+      }
+    }
+    if (!$("show-skeleton").checked) return;
     for (let b = 0; b < 16; b++) {
       ctx.strokeStyle = "rgba(0,0,0,0.6)"; ctx.lineWidth = w + 2;
       ctx.beginPath(); ctx.moveTo(p[PARENT[b]][0], p[PARENT[b]][1]); ctx.lineTo(p[CHILD[b]][0], p[CHILD[b]][1]); ctx.stroke();
