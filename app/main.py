@@ -15,6 +15,7 @@ from importlib.metadata import entry_points
 
 from fastapi import FastAPI
 from fastapi.middleware.cors import CORSMiddleware
+from fastapi.responses import HTMLResponse
 from starlette.middleware.sessions import SessionMiddleware
 
 from app.api import errors
@@ -66,7 +67,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         version="1",
         summary="Register a performer's video against an expert's 3D reference motion.",
         openapi_url=f"{API_PREFIX}/openapi.json",
-        docs_url=f"{API_PREFIX}/docs",
+        docs_url=None,  # served from the swagger-ui-bundle wheel below, not from a CDN
         redoc_url=None,
         lifespan=lifespan,
     )
@@ -85,6 +86,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     errors.install(app)
     app.include_router(api_router, prefix=API_PREFIX)
+    _offline_docs(app)
     _mount_declared(app)
     _document_page_size(app, settings.max_page_size)
 
@@ -113,6 +115,26 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 #: Entry-point group of the packages that add routes to the app (pyproject.toml declares the
 #: web pages' ``web.routes:register``); the app itself imports none of them.
 MOUNTS = "coach.mounts"
+
+
+def _offline_docs(app: FastAPI) -> None:
+    """Swagger UI at ``/api/v1/docs`` with its assets from the swagger-ui-bundle wheel, so
+    the API docs work offline (FastAPI's default loads them from a CDN)."""
+    import swagger_ui_bundle
+    from fastapi.openapi.docs import get_swagger_ui_html
+    from fastapi.staticfiles import StaticFiles
+
+    assets = f"{API_PREFIX}/docs-assets"
+    app.mount(assets, StaticFiles(directory=swagger_ui_bundle.swagger_ui_path), name="docs")
+
+    @app.get(f"{API_PREFIX}/docs", include_in_schema=False)
+    def docs() -> HTMLResponse:
+        return get_swagger_ui_html(
+            openapi_url=app.openapi_url or "", title=f"{app.title} API",
+            swagger_js_url=f"{assets}/swagger-ui-bundle.js",
+            swagger_css_url=f"{assets}/swagger-ui.css",
+            swagger_favicon_url=f"{assets}/favicon-32x32.png",
+        )  # fmt: skip
 
 
 def _mount_declared(app: FastAPI) -> None:

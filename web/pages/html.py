@@ -61,6 +61,12 @@ def _forbidden(request: Request, user: User, message: str):
     return _render(request, "message.html", user, 403, title="Not allowed", message=message)
 
 
+@router.get("/favicon.ico")
+def favicon() -> RedirectResponse:
+    """Browsers ask for /favicon.ico before reading the page's icon link."""
+    return RedirectResponse("/static/favicon.svg", status_code=301)
+
+
 @router.get("/", response_class=HTMLResponse)
 def home(request: Request, session: SessionDep):
     user = page_user(request, session)

@@ -125,9 +125,11 @@
   function plot(d) {
     const W = 1000, H = 220, L = 40, R = 10, T = 10, B = 28;
     const lo = d.reference_frames[0], hi = Math.max(d.reference_frames[1], lo + 1);
-    let top = 10;
-    ["a", "b"].forEach(function (k) { d.curves[k].forEach(function (p) { top = Math.max(top, p[1]); }); });
-    top = Math.ceil(top * 1.1 / 10) * 10;
+    // The axis fits the data (small errors still show which attempt and frames differ), in
+    // the analysis page's whole-degree steps.
+    let most = 0;
+    ["a", "b"].forEach(function (k) { d.curves[k].forEach(function (p) { most = Math.max(most, p[1]); }); });
+    const top = [2, 4, 8, 12, 20, 40, 60, 80, 120, 180].find(function (v) { return v >= most * 1.1; }) || 180;
     const x = function (f) { return L + (W - L - R) * (f - lo) / (hi - lo); };
     const y = function (v) { return T + (H - T - B) * (1 - v / top); };
     const s = svg("svg", { viewBox: "0 0 " + W + " " + H, preserveAspectRatio: "none", id: "cmp-plot-svg",
@@ -141,7 +143,7 @@
     });
     for (let v = 0; v <= top; v += top / 4) {
       s.append(svg("line", { x1: L, x2: W - R, y1: y(v), y2: y(v), stroke: "#e3e6ec" }));
-      s.append(svg("text", { x: 4, y: y(v) + 4, "font-size": 11, fill: "#5c6675" }, Math.round(v) + "°"));
+      s.append(svg("text", { x: 4, y: y(v) + 4, "font-size": 11, fill: "#5c6675" }, (top < 4 ? v.toFixed(1) : Math.round(v)) + "°"));
     }
     ["a", "b"].forEach(function (k) {
       const pl = svg("polyline", { class: "curve-" + k, fill: "none", stroke: COLOUR[k], "stroke-width": k === "b" ? 3 : 2,
