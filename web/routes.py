@@ -33,3 +33,4 @@ def register(app: FastAPI) -> None:
     app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
     app.include_router(viewer.router)
     app.include_router(html.router)
+    app.state.html_error = html.error_page  # browsers get pages for 404/405 (app.api.errors)

@@ -14,7 +14,7 @@ from typing import Any
 from fastapi import FastAPI, Request
 from fastapi.encoders import jsonable_encoder
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse
+from fastapi.responses import JSONResponse, Response
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match
 
@@ -101,7 +101,7 @@ def _allowed_methods(request: Request) -> str:
     return ", ".join(sorted(methods))
 
 
-async def _http_error(request: Request, exc: StarletteHTTPException) -> JSONResponse:
+async def _http_error(request: Request, exc: StarletteHTTPException) -> Response:
     headers = dict(getattr(exc, "headers", None) or {})
     if exc.status_code == 400:  # a body that could not be parsed: like any invalid request
         problem = {"loc": "body", "message": "the request body could not be read", "type": "body"}
@@ -115,6 +115,14 @@ async def _http_error(request: Request, exc: StarletteHTTPException) -> JSONResp
         exc.status_code, HTTPStatus(exc.status_code).phrase.lower().replace(" ", "_")
     )
     message = exc.detail if isinstance(exc.detail, str) else HTTPStatus(exc.status_code).phrase
+    # A person's browser gets a page; the API (and anything not asking for HTML) gets JSON.
+    # The page comes from a mounted package (web), which sets app.state.html_error.
+    from app.api.middleware import API_PREFIX  # (middleware imports this module)
+
+    page = getattr(request.app.state, "html_error", None)
+    wants_html = "text/html" in request.headers.get("accept", "")
+    if page is not None and wants_html and not request.url.path.startswith(API_PREFIX):
+        return page(request, exc.status_code, message)
     return error_response(exc.status_code, code, message, headers=headers or None)
 
 

@@ -57,6 +57,13 @@ def _render(request: Request, name: str, user: User | None, status: int = 200, *
     )  # fmt: skip
 
 
+def error_page(request: Request, status: int, message: str):
+    """What a browser shows for an unknown address or a refused method (not raw JSON)."""
+    title = {404: "Not found", 405: "Not possible here"}.get(status, "Something went wrong")
+    text = "There is no page at this address." if status == 404 else message
+    return _render(request, "message.html", None, status, title=title, message=text)
+
+
 def _forbidden(request: Request, user: User, message: str):
     return _render(request, "message.html", user, 403, title="Not allowed", message=message)
 
