@@ -12,14 +12,19 @@ call count, so a hot loop shows where it is, not in its callers.
 
 from __future__ import annotations
 
-import argparse
-import cProfile
-import io
-import json
-import pstats
 import sys
-import time
 from pathlib import Path
+
+# Run as a script, this file's folder comes first on sys.path, and this module's name would
+# shadow the standard library's ``profile``, which cProfile imports.
+sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
+
+import argparse  # noqa: E402
+import cProfile  # noqa: E402
+import io  # noqa: E402
+import json  # noqa: E402
+import pstats  # noqa: E402
+import time  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
