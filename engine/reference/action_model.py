@@ -325,7 +325,8 @@ def _distances(x: list[np.ndarray], kept: np.ndarray, s: TakesSettings) -> np.nd
     for a in range(n):
         for b in range(n):
             if a != b and kept[a] and kept[b]:
-                D[a, b] = synchronise(x[a], x[b], mu=s.mu, band=s.band).distance
+                # eq. 19 needs the DP's distance only: no sub-frame refinement
+                D[a, b] = synchronise(x[a], x[b], mu=s.mu, band=s.band, refine=False).distance
     return D
 
 
