@@ -195,16 +195,28 @@ def broker_tasks() -> BrokerTasks | None:
             channel = conn.default_channel
             pipe = channel.client.pipeline()
             pipe.lrange(app.conf.task_default_queue, 0, -1)
-            pipe.hvals(channel.unacked_key)
-            waiting, unacked = pipe.execute()
+            pipe.hgetall(channel.unacked_key)
+            # kombu scores each delivery tag with the time a worker took it.
+            pipe.zrange(channel.unacked_index_key, 0, -1, withscores=True)
+            waiting, unacked, taken = pipe.execute()
     except Exception as exc:  # kombu/redis raise many types; all mean "cannot tell now"
         log.warning("broker.unreadable error=%s", exc)
         return None
-    held = [json.loads(raw)[0] for raw in unacked]  # [message, exchange, routing key]
+    when = {_text(tag): float(score) for tag, score in taken}
+    held: dict[str, float] = {}
+    for tag, raw in unacked.items():
+        task_id = _task_id(json.loads(raw)[0])  # [message, exchange, routing key]
+        if task_id:
+            held[task_id] = max(held.get(task_id, 0.0), when.get(_text(tag), 0.0))
     return BrokerTasks(
         frozenset(filter(None, (_task_id(json.loads(raw)) for raw in waiting))),
-        frozenset(filter(None, (_task_id(m) for m in held))),
+        frozenset(held),
+        taken_at=held,
     )
+
+
+def _text(value: bytes | str) -> str:
+    return value.decode() if isinstance(value, bytes) else value
 
 
 def _task_id(message: dict) -> str | None:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import os
 import re
 import time
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
@@ -156,10 +157,15 @@ class BrokerTasks:
     held : frozenset of str or None
         Messages a worker took and has not acknowledged (running, or waiting for a retry's
         countdown); None where the transport cannot tell (the embedded one).
+    taken_at : dict of str to float
+        When a worker took each held message (Unix seconds), where the transport records it
+        (Redis's ``unacked_index``). A message taken moments ago shows a live worker that has
+        not started the task yet, though the analysis' last heartbeat is old.
     """
 
     waiting: frozenset[str]
     held: frozenset[str] | None
+    taken_at: Mapping[str, float] = field(default_factory=dict)
 
 
 def is_temporary(path: Path) -> bool:

@@ -26,7 +26,9 @@ no message of it waits in the queue (that one only waits for a free worker), its
 ``lost_after_s`` old or absent (the rule the workers apply too: a younger one means a live
 run, which would drop the new message as a duplicate), and its last sign of life (heartbeat,
 status.json, the row's own times) is older than ``publish_grace_s`` if the broker holds no
-message of it, or than ``lost_after_s`` if a worker holds one (that worker is dead).
+message of it, or than ``lost_after_s`` if a worker holds one (that worker is dead). A
+worker taking a message counts as a sign of life too (Redis records when): the task has not
+started its heartbeat yet.
 
 Queueing again is always safe: stages whose output exists are skipped, and a worker drops an
 entry message for an analysis whose heartbeat another run keeps fresh. The row's
@@ -104,7 +106,10 @@ def lost_cause(
     if ids & broker.waiting:
         return None  # waits for a free worker
     held = broker.held is None or bool(ids & broker.held)
-    if held and quiet < settings.lost_after_s:
+    # A worker that took a message moments ago is alive, though its task has not started
+    # the heartbeat yet (the message may have waited long for a free worker).
+    taken = max((broker.taken_at.get(i, 0.0) for i in ids), default=0.0)
+    if held and min(quiet, now - taken) < settings.lost_after_s:
         # A worker took it (or the transport cannot say): only a stale heartbeat proves that
         # worker dead; its task would renew the heartbeat every few seconds.
         return None

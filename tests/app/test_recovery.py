@@ -89,6 +89,20 @@ def test_held_message_waits_out_lost_after_not_the_grace(tmp_path, settings):
     assert recovery.lost_cause(analysis, gone, settings, time.time()) == "message lost"
 
 
+def test_a_message_taken_moments_ago_is_a_live_worker(tmp_path, settings):
+    """The message waited long for a free worker, and the heartbeat is the last run's: the
+    worker that has just taken it is starting the task, not dead."""
+    analysis = _analysis(tmp_path, age_s=settings.lost_after_s * 3)
+    _age(AnalysisFolder(analysis.work_dir).heartbeat, settings.lost_after_s * 2)
+    now = time.time()
+    just_taken = BrokerTasks(frozenset(), frozenset({"t1"}), taken_at={"t1": now - 1})
+    assert recovery.lost_cause(analysis, just_taken, settings, now) is None
+    long_taken = BrokerTasks(
+        frozenset(), frozenset({"t1"}), taken_at={"t1": now - settings.lost_after_s - 1}
+    )
+    assert recovery.lost_cause(analysis, long_taken, settings, now) == "worker lost"
+
+
 @pytest.mark.parametrize("finished", ["result", "cancel", "status"])
 def test_finished_folders_are_left_to_the_reflector(tmp_path, settings, finished):
     analysis = _analysis(tmp_path)

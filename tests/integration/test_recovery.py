@@ -212,6 +212,10 @@ def test_sigkilled_worker_is_replaced_long_before_the_visibility_timeout(
     first = workers.start(app=FAKE_APP, name="first")
     name = service.create("a-sigkill", short_video)
     wait_mid_stage_3(service.row(name).work_dir, workers)
+    # The broker says which of its stage messages a worker holds, and since when.
+    broker = CeleryQueue().broker_tasks()
+    held = {i for i in broker.held if i.startswith(service.row(name).task_id)}
+    assert held and all(0 <= time.time() - broker.taken_at[i] < 60 for i in held), broker
     killed = time.monotonic()
     workers.kill(first)  # no warm shutdown, no ack: its message stays unacknowledged for 2 h
     workers.start(app=FAKE_APP, name="second")
