@@ -209,6 +209,7 @@ def d_K(
     read several ways, and the best reading counts for each posture: a pose model swaps left
     and right in many frames (66 % on P2), so the labels as given and their mirror
     (:func:`engine.stages.perception.readings`) are a hidden choice per frame and posture.
+    Scoring many batches against one detection: :class:`KeypointTarget`.
 
     Parameters
     ----------
@@ -226,15 +227,31 @@ def d_K(
     d : ndarray, shape (N,)
         In [0, 1]; 0 where no keypoint carries weight.
     """
-    kp = np.asarray(keypoints, float).reshape(-1, 17, 2)
-    conf = np.asarray(confidence, float).reshape(-1, 17)
-    w = np.where(np.isfinite(kp).all(-1), conf, 0.0)  # (R, 17)
-    total = w.sum(-1)
-    if not np.any(total > 0):
-        return np.zeros(projected.shape[0])
-    wn = w / (np.maximum(total, 1e-12)[:, None] * tau_px)
-    diff = projected[:, None] - np.nan_to_num(kp)[None]  # (N, R, 17, 2)
-    r = np.sqrt(np.einsum("nrjk,nrjk->nrj", diff, diff))  # einsum: 37 % faster than norm
-    cost = np.einsum("nrj,rj->nr", np.minimum(r, tau_px), wn)
-    cost[:, total <= 0] = np.inf  # a reading with no keypoint is no reading
-    return cost.min(-1)
+    return KeypointTarget(keypoints, confidence, tau_px=tau_px).d_K(projected)
+
+
+class KeypointTarget:
+    """One detection prepared for :func:`d_K`: its weights are computed once, not per batch
+    (stage 3 scores some 500 batches per frame against one detection)."""
+
+    def __init__(self, keypoints: np.ndarray, confidence: np.ndarray, *, tau_px: float) -> None:
+        kp = np.asarray(keypoints, float).reshape(-1, 17, 2)
+        conf = np.asarray(confidence, float).reshape(-1, 17)
+        w = np.where(np.isfinite(kp).all(-1), conf, 0.0)  # (R, 17)
+        total = w.sum(-1)
+        #: Whether any keypoint carries weight; without, d_K is 0.
+        self.any = bool(np.any(total > 0))
+        self.tau_px = tau_px
+        self._wn = w / (np.maximum(total, 1e-12)[:, None] * tau_px)  # (R, 17)
+        self._kp = np.nan_to_num(kp)[None]  # (1, R, 17, 2)
+        self._none = total <= 0  # (R,) readings with no keypoint
+
+    def d_K(self, projected: np.ndarray) -> np.ndarray:
+        """d_K of postures' projected joints (N, 17, 2) -> (N,)."""
+        if not self.any:
+            return np.zeros(projected.shape[0])
+        diff = projected[:, None] - self._kp  # (N, R, 17, 2)
+        r = np.sqrt(np.einsum("nrjk,nrjk->nrj", diff, diff))  # einsum: 37 % faster than norm
+        cost = np.einsum("nrj,rj->nr", np.minimum(r, self.tau_px), self._wn)
+        cost[:, self._none] = np.inf  # a reading with no keypoint is no reading
+        return cost.min(-1)

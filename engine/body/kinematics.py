@@ -10,6 +10,7 @@ needed (joint limits work directly on joint positions).
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from engine.body.skeleton import BONE_CHILD, BONE_PARENT, BONE_PART, N_PARTS, PART_BONES
 
@@ -75,17 +76,32 @@ def rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """
     a = a / np.linalg.norm(a, axis=-1, keepdims=True)
     b = b / np.linalg.norm(b, axis=-1, keepdims=True)
-    v = np.cross(a, b)
+    v = cross3(a, b)
     c = np.sum(a * b, axis=-1)
     # any axis normal to a, for the antiparallel case
     helper = np.where(np.abs(a[..., :1]) < 0.9, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-    n = np.cross(a, helper)
+    n = cross3(a, helper)
     n /= np.linalg.norm(n, axis=-1, keepdims=True)
     anti = c < -1.0 + 1e-9
     K = _skew(v)
     R = np.eye(3) + K + K @ K / (1.0 + np.where(anti, 1.0, c))[..., None, None]
     R_pi = 2.0 * n[..., :, None] * n[..., None, :] - np.eye(3)
     return np.where(anti[..., None, None], R_pi, R)
+
+
+def cross3(a: ArrayLike, b: ArrayLike) -> np.ndarray:
+    """Cross product of 3-vectors (..., 3) x (..., 3) -> (..., 3), broadcasting.
+
+    The same products and differences as ``np.cross`` (so the same values), without its axis
+    handling, which costs about 0.1 ms a call: stage 3 makes some 130,000 calls on 3-vectors
+    per 150-frame video (profile of P2).
+    """
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
 
 
 def _skew(v: np.ndarray) -> np.ndarray:

@@ -25,6 +25,9 @@ from engine.render.capsules.projection import (
 )
 from engine.render.capsules.target import Target, _check_camera_target, _d_A, _d_E
 
+#: Each part's complement: the capsules of every other part (np.setdiff1d's values, once).
+_OTHER_CAPS = tuple(np.setdiff1d(_ALL_CAPS, caps) for caps in PART_CAPSULES)
+
 
 @dataclass
 class _Fixed:
@@ -123,7 +126,7 @@ class PartScorer:
     def _fixed_for(self, part: int) -> _Fixed:
         f = self._fixed.get(part)
         if f is None:
-            caps = np.setdiff1d(_ALL_CAPS, PART_CAPSULES[part])
+            caps = _OTHER_CAPS[part]
             t = self.target
             # the whole-image render of the other parts, touching only the rows they cover
             z = np.empty(t.silhouette.shape)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from engine.body.kinematics import bone_vectors, part_rotations, rotation_about_axis
+from engine.body.kinematics import bone_vectors, cross3, part_rotations, rotation_about_axis
 from engine.body.skeleton import (
     BONE_CHILD,
     BONE_PARENT,
@@ -108,11 +108,11 @@ def _sphere(n: int) -> np.ndarray:
 
 def _turn_to(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Smallest rotations taking unit direction a (3,) to each of b (n, 3), shape (n, 3, 3)."""
-    axis = np.cross(a, b)
+    axis = cross3(a, b)
     s = np.linalg.norm(axis, axis=1)
     c = b @ a
     ang = np.arctan2(s, c)
-    perp = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
+    perp = cross3(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
     axis = np.where(s[:, None] > 1e-9, axis, perp)
     return rotation_about_axis(axis, ang)
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from engine.body.kinematics import rotation_about_axis
+from engine.body.kinematics import cross3, rotation_about_axis
 from engine.body.skeleton import N_PARTS, PART_BONES
 from engine.measures import d_B
 from engine.render.camera import Camera
@@ -101,12 +101,12 @@ def _pattern_moves(
     """
     n = camera.view_dir
     d = _part_dir(cur, p)
-    a1 = np.cross(n, d)
+    a1 = cross3(n, d)
     axes = [n, a1] if np.linalg.norm(a1) > 1e-9 and not in_plane else [n]
     if len(PART_BONES[p]) > 1 and not in_plane:
-        axes.append(np.cross(n, a1) if np.linalg.norm(a1) > 1e-9 else d)
-    angles = [np.asarray(sg * step) for sg in (-1.0, 1.0)]
-    Rs = np.stack([rotation_about_axis(ax, a) for ax in axes for a in angles])
+        axes.append(cross3(n, a1) if np.linalg.norm(a1) > 1e-9 else d)
+    # every axis by -step and +step, in one call (the same values as one call each)
+    Rs = rotation_about_axis(np.repeat(axes, 2, axis=0), np.tile([-step, step], len(axes)))
     samples = list(_turned(cur, p, Rs))
     if alone and len(_SUBTREES[p]) > 1:
         samples.extend(_turned_alone(cur, p, Rs))

@@ -6,7 +6,7 @@ import numpy as np
 
 from engine.body.shapes import CAPSULE_A, CAPSULE_B, CAPSULE_T, BodyShape
 from engine.body.skeleton import N_PARTS
-from engine.measures import d_K
+from engine.measures import KeypointTarget
 from engine.render.camera import Camera
 from engine.render.capsules import PART_CAPSULES, PartScorer, Target, d_A_batch, d_S_batch
 from engine.stages.candidates.settings import CandidateSettings
@@ -35,7 +35,7 @@ class _Scorer:
         self.kp = None
         if keypoints is not None and s.keypoint_weight > 0 and np.any(keypoints[1] > 0):
             tau_px = s.keypoint_tau * camera.scale * max(float(np.ptp(joints[:, 1])), 0.3)
-            self.kp = (keypoints[0], keypoints[1], tau_px, s.keypoint_weight)
+            self.kp = (KeypointTarget(keypoints[0], keypoints[1], tau_px=tau_px), s.keypoint_weight)
         self.lam = (s.lambda_a, s.lambda_e)
         self.subpixel = s.subpixel_rows
         self.parts = PartScorer(
@@ -50,8 +50,8 @@ class _Scorer:
         """The keypoint term w d_K of postures (N, 17, 3), (N,); zeros without keypoints."""
         if self.kp is None:
             return np.zeros(len(postures))
-        kp, conf, tau_px, w = self.kp
-        return w * d_K(self.camera.project(postures), kp, conf, tau_px=tau_px)
+        target, w = self.kp
+        return w * target.d_K(self.camera.project(postures))
 
     def part(self, part: int, samples: np.ndarray) -> np.ndarray:
         """Likelihood cost of poses of one part, the others at :meth:`set_pose`'s, (S,)."""
