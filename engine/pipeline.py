@@ -16,9 +16,11 @@ caller's edge (command line, worker task) parses them once. Progress goes out th
 from __future__ import annotations
 
 import dataclasses
+import multiprocessing
 import os
 import time
 from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
 
 import numpy as np
 
@@ -59,7 +61,7 @@ from engine.stages.selection import SelectionSettings, select_and_refine
 
 # What a service calls: the three steps, their outputs, and the parsers of its inputs.
 __all__ = [
-    "CandidateChunk", "Prepared", "Settings", "Stages02", "analyze", "candidates",
+    "CandidateChunk", "Prepared", "Settings", "Stages02", "all_candidates", "analyze", "candidates",
     "parse_domain", "prepare", "run_stages_0_2", "select",
 ]  # fmt: skip
 
@@ -153,23 +155,78 @@ def candidates(
     """
     s = settings or Settings()
     frames = range(prepared.n_frames) if frames is None else frames
+    inputs = _chunk_inputs(prepared, frames, s)
+    t0 = time.perf_counter()
+    out = estimate_candidates_chunk(**inputs, on_progress=on_progress)
+    return _chunk(prepared, frames, out, time.perf_counter() - t0)
+
+
+def _chunk_inputs(prepared: Prepared, frames: range, s: Settings) -> dict:
+    """The arguments of :func:`estimate_candidates_chunk` for ``frames``: only their frames'
+    data, so a chunk ships to another process cheaply."""
     if len(frames) == 0 or frames.start < 0 or frames.stop > prepared.n_frames:
         raise InvalidInput(f"frames must be a non-empty range within 0..{prepared.n_frames}")
     idx = np.asarray(frames)
-    t0 = time.perf_counter()
-    out = estimate_candidates_chunk(
-        prepared.silhouettes[idx], prepared.edges[idx], prepared.camera, prepared.shape,
-        prepared.initial_postures(frames), settings=s.candidates,
+    return dict(
+        target_silhouettes=prepared.silhouettes[idx], target_edges=prepared.edges[idx],
+        camera=prepared.camera, shape=prepared.shape,
+        initial_joints=prepared.initial_postures(frames), settings=s.candidates,
         rng=frame_rngs(s.seed, frames), keypoints=prepared.frame_keypoints(frames),
-        on_progress=on_progress,
     )  # fmt: skip
+
+
+def _chunk(prepared: Prepared, frames: range, out: list, seconds: float) -> CandidateChunk:
+    idx = np.asarray(frames)
     return CandidateChunk(
         frames=idx, candidates=[f.candidates for f in out], d_s=[f.d_s for f in out],
         flags=tuple(
             tuple(prepared.flags[t]) + tuple(f.flags) for t, f in zip(idx, out, strict=True)
         ),
-        seconds=time.perf_counter() - t0,
+        seconds=seconds,
     )  # fmt: skip
+
+
+def _timed_chunk(inputs: dict) -> tuple[list, float]:
+    """:func:`estimate_candidates_chunk` in a pool process, with its seconds."""
+    t0 = time.perf_counter()
+    return estimate_candidates_chunk(**inputs), time.perf_counter() - t0
+
+
+def all_candidates(
+    prepared: Prepared,
+    settings: Settings | None = None,
+    *,
+    workers: int = 1,
+    on_progress: ProgressFn | None = None,
+) -> list[CandidateChunk]:
+    """Stage 3 on every frame, in chunks of ``settings.chunk_frames``, on ``workers``
+    processes.
+
+    Frames are independent given ``prepared`` (see :func:`candidates`), so the chunks give
+    the same candidates in any process: more workers change the wall time, not the result.
+    With several, progress moves as chunks finish; each chunk's ``seconds`` stay its own
+    compute time.
+    """
+    s = settings or Settings()
+    ranges = prepared.chunks(max(1, -(-prepared.n_frames // s.chunk_frames)))
+    workers = max(1, min(int(workers), len(ranges)))
+    if workers == 1:
+        done: list[CandidateChunk] = []
+        for i, r in enumerate(ranges):
+            done.append(candidates(prepared, r, s, on_progress=_share(on_progress, i, len(ranges))))
+        return done
+    # spawn, not fork: this process may hold threads (the pose model's, BLAS) that a forked
+    # child would inherit in an unknown state.
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+        futures = {pool.submit(_timed_chunk, _chunk_inputs(prepared, r, s)): r for r in ranges}
+        chunks = []
+        for n_done, future in enumerate(as_completed(futures), start=1):
+            out, seconds = future.result()
+            chunks.append(_chunk(prepared, futures[future], out, seconds))
+            if on_progress is not None:
+                on_progress("candidates", n_done / len(ranges))
+    return sorted(chunks, key=lambda c: int(c.frames[0]))
 
 
 def select(
@@ -235,18 +292,17 @@ def analyze(
     mapping: dict[str, str] | None = None,
     units_to_m: float | None = None,
     frames: tuple[int, int] | None = None,
+    workers: int = 1,
     on_progress: ProgressFn | None = None,
 ) -> dict:
-    """The whole registration (thesis chapter 4) in this process -> the result document.
+    """The whole registration (thesis chapter 4) -> the result document.
 
-    Parameters as :func:`prepare`."""
+    Parameters as :func:`prepare`; stage 3 runs on ``workers`` processes
+    (:func:`all_candidates`), the rest in this one."""
     s = settings or Settings()
     prepared = prepare(reference_path, video_path, s, domain=domain, mapping=mapping,
                        units_to_m=units_to_m, frames=frames, on_progress=on_progress)  # fmt: skip
-    chunks = [
-        candidates(prepared, r, s, on_progress=on_progress)
-        for r in prepared.chunks(max(1, -(-prepared.n_frames // s.chunk_frames)))
-    ]
+    chunks = all_candidates(prepared, s, workers=workers, on_progress=on_progress)
     return select(prepared, chunks, s, on_progress=on_progress)
 
 

@@ -7,6 +7,7 @@ JSON of DESIGN.md, plus an optional self-contained HTML report.
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 
 from engine.errors import InvalidInput
@@ -34,6 +35,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "pose model (--fast is --preset fast)",
     )  # fmt: skip
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument(
+        "--workers", type=int, default=len(os.sched_getaffinity(0)),
+        help="processes for the posture candidates, the longest stage (default: one per "
+        "core); the result is the same with any number",
+    )  # fmt: skip
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.set_defaults(func=run)
 
@@ -92,13 +98,15 @@ def run(args: argparse.Namespace) -> int:
     from engine.reference.domain import find_domain
     from engine.settings import Settings
 
+    if args.workers < 1:
+        raise InvalidInput(f"--workers must be >= 1, got {args.workers}")
     n = read_video_count(args.video)
     frames = parse_frames(args.frames, n) if args.frames else None
     preset = args.preset or ("fast" if args.fast else "default")
     settings = Settings.from_dict({"preset": preset, "seed": args.seed})
     doc = analyze(
         args.reference, args.video, settings, domain=find_domain(args.reference),
-        frames=frames, on_progress=_progress(args.quiet),
+        frames=frames, workers=args.workers, on_progress=_progress(args.quiet),
     )  # fmt: skip
     write_result(doc, args.out)
     result = Result.from_dict(doc)

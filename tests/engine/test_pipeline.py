@@ -10,7 +10,15 @@ from engine.errors import InvalidInput
 from engine.io.bvh import write_bvh
 from engine.io.case import write_case
 from engine.io.result import validate_result
-from engine.pipeline import CandidateChunk, Prepared, analyze, candidates, prepare, select
+from engine.pipeline import (
+    CandidateChunk,
+    Prepared,
+    all_candidates,
+    analyze,
+    candidates,
+    prepare,
+    select,
+)
 from engine.settings import Settings
 from engine.stages.selection import SelectionSettings
 from engine.synth import SynthSettings, synthesize
@@ -115,6 +123,20 @@ def test_candidates_do_not_depend_on_the_chunking(prepared) -> None:
     assert candidates(prepared, range(2, 8), Settings.from_dict(prev)).frames.tolist() == list(
         range(2, 8)
     )
+
+
+def test_stage_3_on_two_processes_gives_the_same_candidates(prepared) -> None:
+    one = all_candidates(prepared, S, workers=1)
+    progress: list[float] = []
+    two = all_candidates(prepared, S, workers=2, on_progress=lambda _, f: progress.append(f))
+    assert [c.frames.tolist() for c in two] == [c.frames.tolist() for c in one]
+    assert len(one) >= 2  # there was something to share
+    for a, b in zip(one, two, strict=True):
+        for k0, k1, d0, d1 in zip(a.candidates, b.candidates, a.d_s, b.d_s, strict=True):
+            np.testing.assert_array_equal(k0, k1)
+            np.testing.assert_array_equal(d0, d1)
+        assert a.flags == b.flags
+    assert progress == sorted(progress) and progress[-1] == 1.0
 
 
 def test_analyze_gives_a_valid_result(case_dir) -> None:
