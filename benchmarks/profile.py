@@ -52,7 +52,7 @@ def top_functions(profile: cProfile.Profile, n: int) -> str:
     return "\n".join(lines[start : start + n + 1])
 
 
-def run(case: Path, settings: Settings, n: int) -> None:
+def run(case: Path, settings: Settings, n: int, dump: Path | None = None) -> None:
     t0 = time.perf_counter()
     prepared = prepare(case / "reference.bvh", case / "video.mp4", settings)
     t_prepare = time.perf_counter() - t0
@@ -71,6 +71,10 @@ def run(case: Path, settings: Settings, n: int) -> None:
     doc = select(prepared, chunks, settings)
     stage4.disable()
     t_stage4 = time.perf_counter() - t0
+    if dump is not None:  # for pstats' callers/callees, or snakeviz
+        dump.mkdir(parents=True, exist_ok=True)
+        stage3.dump_stats(dump / f"{case.name}-stage3.prof")
+        stage4.dump_stats(dump / f"{case.name}-stage4.prof")
     frames = prepared.n_frames
     total = t_prepare + t_stage3 + t_stage4
     print(f"\n## {case.name}: {frames} frames, {total:.1f} s ({total / frames:.2f} s/frame)")
@@ -90,10 +94,11 @@ def main() -> None:
     ap.add_argument("--cases", nargs="+", default=["P2", "P4"])
     ap.add_argument("--top", type=int, default=15)
     ap.add_argument("--settings", default="{}", help="settings overrides as JSON")
+    ap.add_argument("--dump", type=Path, help="also save each profile here (.prof files)")
     args = ap.parse_args()
     settings = Settings.from_dict(json.loads(args.settings))
     for name in args.cases:
-        run(case_dir(name), settings, args.top)
+        run(case_dir(name), settings, args.top, args.dump)
 
 
 if __name__ == "__main__":
