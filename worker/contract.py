@@ -167,6 +167,15 @@ class BrokerTasks:
     held: frozenset[str] | None
     taken_at: Mapping[str, float] = field(default_factory=dict)
 
+    def merged(self, later: BrokerTasks) -> BrokerTasks:
+        """What either of two readings saw: a message a worker was taking during the first
+        (out of the queue, not yet recorded as held) shows in the second."""
+        held = None if self.held is None or later.held is None else self.held | later.held
+        taken = {**self.taken_at}
+        for task_id, when in later.taken_at.items():
+            taken[task_id] = max(taken.get(task_id, 0.0), when)
+        return BrokerTasks(self.waiting | later.waiting, held, taken)
+
 
 def is_temporary(path: Path) -> bool:
     """A file still being written (its writer renames it when complete)."""

@@ -55,6 +55,9 @@ from worker.contract import AnalysisFolder, BrokerTasks
 
 log = logging.getLogger("app.recovery")
 
+#: Seconds between the two readings of the broker before anything is queued again.
+RECHECK_S = 0.2
+
 
 def _mtime(path: os.PathLike) -> float:
     try:
@@ -136,6 +139,15 @@ def recover(
         return []  # broker unreachable: nothing can be queued now anyway
     # Signs read after the broker: a task that started meanwhile shows in its heartbeat.
     now = max(now, time.time())
+    if not any(lost_cause(a, broker, settings, now) for a in suspects):
+        return []
+    # Redis moves a message from the queue to a worker in two steps; one caught between them
+    # is in neither. A second reading a moment later sees it held.
+    time.sleep(RECHECK_S)
+    again = queue.broker_tasks()
+    if again is None:
+        return []
+    broker = broker.merged(again)
     recovered = []
     for analysis in suspects:
         cause = lost_cause(analysis, broker, settings, now)

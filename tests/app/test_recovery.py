@@ -103,6 +103,27 @@ def test_a_message_taken_moments_ago_is_a_live_worker(tmp_path, settings):
     assert recovery.lost_cause(analysis, long_taken, settings, now) == "worker lost"
 
 
+def test_a_message_caught_between_queue_and_worker_is_not_lost(
+    app, client, club_ref, video_file, settings, monkeypatch
+):
+    """Redis moves a message from the queue to a worker in two steps: a reading between
+    them sees it nowhere. Recovery reads the broker again before it queues anything."""
+    monkeypatch.setattr(recovery, "RECHECK_S", 0.0)
+    upload(client, club_ref, video_file)
+    later = time.time() + settings.lost_after_s + 1
+    readings = [BrokerTasks(frozenset(), frozenset())]  # the message in transit
+
+    class InTransit(BrokerQueue):
+        def broker_tasks(self) -> BrokerTasks:
+            if readings:
+                return readings.pop()
+            return BrokerTasks(frozenset(), frozenset({"task-1"}), taken_at={"task-1": later - 1})
+
+    with app.state.sessionmaker() as session:
+        assert recovery.recover(session, settings=settings, queue=InTransit(), now=later) == []
+        assert recovery.recover(session, settings=settings, queue=BrokerQueue(), now=later) != []
+
+
 @pytest.mark.parametrize("finished", ["result", "cancel", "status"])
 def test_finished_folders_are_left_to_the_reflector(tmp_path, settings, finished):
     analysis = _analysis(tmp_path)
