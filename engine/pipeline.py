@@ -3,8 +3,9 @@
     prepare     stages 0-2: foreground, calibration, approximate alignment (4.1, 4.2, 4.5)
     candidates  stage 3 on a range of video frames (4.6): independent across chunks given
                 prepare's output, so workers can fan chunks out
+    all_candidates  stage 3 on every frame, its chunks on one or several processes
     select      stage 4 (4.7): boundaries, selection, refined C, errors -> the result JSON
-    analyze     all of it in one process
+    analyze     all of it, stage 3 on ``workers`` processes
 
 Each step's output is a small object that saves to one file (:mod:`engine.stage_outputs`),
 so a service can store it in the analysis folder and skip the step when it is redone.
