@@ -139,17 +139,19 @@ def recover(
         return []  # broker unreachable: nothing can be queued now anyway
     # Signs read after the broker: a task that started meanwhile shows in its heartbeat.
     now = max(now, time.time())
-    if not any(lost_cause(a, broker, settings, now) for a in suspects):
+    lost = [a for a in suspects if lost_cause(a, broker, settings, now)]
+    if not lost:
         return []
     # Redis moves a message from the queue to a worker in two steps; one caught between them
-    # is in neither. A second reading a moment later sees it held.
+    # is in neither. A second reading a moment later sees it held. (The merged reading only
+    # adds signs of life, so only the analyses lost in the first can be lost in it.)
     time.sleep(RECHECK_S)
     again = queue.broker_tasks()
     if again is None:
         return []
     broker = broker.merged(again)
     recovered = []
-    for analysis in suspects:
+    for analysis in lost:
         cause = lost_cause(analysis, broker, settings, now)
         if cause is not None and _requeue(session, settings, queue, analysis, cause):
             recovered.append(analysis.id)
