@@ -212,6 +212,16 @@ def test_candidates_command_bad_input_is_one_line_error(case_dir, tmp_path, caps
     assert "selects no frame" in capsys.readouterr().err
 
 
+def test_analyze_command_refuses_a_worker_count_below_one(case_dir, tmp_path, capsys) -> None:
+    from engine.cli import main
+
+    out = tmp_path / "r.json"
+    cmd = ["analyze", case_dir["reference"], case_dir["video"], "--out", str(out), "--quiet"]
+    assert main([*cmd, "--workers", "0"]) == 2
+    assert "--workers must be >= 1" in capsys.readouterr().err
+    assert not out.exists()
+
+
 def test_a_video_with_nobody_in_it_fails_with_a_plain_message(case_dir, tmp_path) -> None:
     from engine.errors import RegistrationFailed
     from engine.io.encode import write_video
