@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from engine.body.limits import JOINT_ANGLES, joint_angles_deg
 from engine.body.skeleton import BONE_CHILD, BONE_NAMES, BONE_PARENT, JOINTS
 from engine.io.result_reader import Result, as_result
 from engine.report import MISFIT_RGB
@@ -312,29 +313,6 @@ def report_stills(
 
 
 # ---- exports
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
-
-
-#: Joint angle columns: (name, parent bone, bone); the angle between consecutive bones.
-JOINT_ANGLES = tuple(
-    (f"angle_{JOINTS[int(BONE_PARENT[b])]}_deg:{BONE_NAMES[pb]}|{BONE_NAMES[b]}", pb, b)
-    for b in range(len(BONE_NAMES))
-    for pb in range(len(BONE_NAMES))
-    if int(BONE_CHILD[pb]) == int(BONE_PARENT[b])
-)
-
-
-def joint_angles_deg(joints: np.ndarray) -> np.ndarray:
-    """Angles (deg) between consecutive bones of postures (T, 17, 3) -> (T, len(JOINT_ANGLES))."""
-    j = np.asarray(joints, float)
-    d = _unit(j[:, BONE_CHILD] - j[:, BONE_PARENT])
-    pb = [a[1] for a in JOINT_ANGLES]
-    b = [a[2] for a in JOINT_ANGLES]
-    cos = np.clip((d[:, pb] * d[:, b]).sum(-1), -1.0, 1.0)
-    return np.degrees(np.arccos(cos))
-
-
 def result_csv(result: Result | Mapping[str, Any]) -> str:
     """One row per video frame: timing, errors per bone, each bone's range over the
     candidates the video cannot tell apart (``range_deg:BONE`` as ``lo-hi``; empty for

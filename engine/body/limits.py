@@ -11,7 +11,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from engine.body.skeleton import LIMIT_A, LIMIT_B, LIMIT_JOINT, LIMIT_MIN_RAD
+from engine.body.skeleton import (
+    BONE_CHILD,
+    BONE_NAMES,
+    BONE_PARENT,
+    JOINTS,
+    LIMIT_A,
+    LIMIT_B,
+    LIMIT_JOINT,
+    LIMIT_MIN_RAD,
+)
 from engine.errors import InvalidInput
 
 
@@ -87,3 +96,24 @@ def within_limits(joints: np.ndarray, *, margin_rad: float = 0.0) -> np.ndarray:
     ok : ndarray of bool, shape (...)
     """
     return ~np.any(limit_violations(joints, margin_rad=margin_rad), axis=-1)
+
+
+#: CSV columns of the angle between each pair of consecutive bones: (name, parent bone, bone).
+#: Every joint angle, not only the limited ones (the export's and the capture's CSV).
+JOINT_ANGLES: tuple[tuple[str, int, int], ...] = tuple(
+    (f"angle_{JOINTS[int(BONE_PARENT[b])]}_deg:{BONE_NAMES[pb]}|{BONE_NAMES[b]}", pb, b)
+    for b in range(len(BONE_NAMES))
+    for pb in range(len(BONE_NAMES))
+    if int(BONE_CHILD[pb]) == int(BONE_PARENT[b])
+)
+
+
+def joint_angles_deg(joints: np.ndarray) -> np.ndarray:
+    """Angles (deg) between consecutive bones of postures (T, 17, 3) -> (T, len(JOINT_ANGLES))."""
+    j = np.asarray(joints, float)
+    d = j[:, BONE_CHILD] - j[:, BONE_PARENT]
+    d = d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-12)
+    pb = [a[1] for a in JOINT_ANGLES]
+    b = [a[2] for a in JOINT_ANGLES]
+    cos = np.clip((d[:, pb] * d[:, b]).sum(-1), -1.0, 1.0)
+    return np.degrees(np.arccos(cos))

@@ -91,6 +91,11 @@ class Perception:
         The model found a person in the frame.
     model : str
         Name and version of the model, stored with the analysis.
+    landmarks : ndarray, shape (T', 33, 4), optional
+        The model's own landmarks (BlazePose topology): (u, v) pixels, its relative depth z
+        (pixels, larger = farther from the camera, 0 at the hips' mid-point) and visibility;
+        NaN in frames without a detection. Reference-free capture reads its depth hint and
+        head landmarks; None for a model (or a stored stage) without them.
     """
 
     mask: np.ndarray
@@ -99,6 +104,7 @@ class Perception:
     facing: np.ndarray
     detected: np.ndarray
     model: str
+    landmarks: np.ndarray | None = None
 
     @property
     def n_frames(self) -> int:
@@ -110,11 +116,14 @@ class Perception:
 
     def to_arrays(self) -> dict[str, np.ndarray]:
         """Arrays for :func:`engine.io.stagefiles.save_arrays` (the mask stays uint8)."""
-        return {
+        out = {
             "perception_mask": self.mask, "perception_keypoints": self.keypoints,
             "perception_confidence": self.confidence, "perception_facing": self.facing,
             "perception_detected": self.detected, "perception_model": np.array(self.model),
         }  # fmt: skip
+        if self.landmarks is not None:
+            out["perception_landmarks"] = self.landmarks
+        return out
 
     @classmethod
     def from_arrays(cls, a: dict[str, np.ndarray]) -> Perception | None:
@@ -125,18 +134,23 @@ class Perception:
             np.asarray(a["perception_mask"]), np.asarray(a["perception_keypoints"]),
             np.asarray(a["perception_confidence"]), np.asarray(a["perception_facing"]),
             np.asarray(a["perception_detected"]), str(a["perception_model"]),
+            np.asarray(a["perception_landmarks"]) if "perception_landmarks" in a else None,
         )  # fmt: skip
 
     def cut(self, start: int, end: int) -> Perception:
         """Frames ``start``..``end - 1`` only."""
         sl = slice(start, end)
+        lm = None if self.landmarks is None else self.landmarks[sl]
         return Perception(self.mask[sl], self.keypoints[sl], self.confidence[sl],
-                          self.facing[sl], self.detected[sl], self.model)  # fmt: skip
+                          self.facing[sl], self.detected[sl], self.model, lm)  # fmt: skip
 
     def scaled(self, factor: float) -> Perception:
         """Keypoints in an image scaled by ``factor`` (the mask is left as it is)."""
+        lm = None
+        if self.landmarks is not None:
+            lm = self.landmarks * np.array([factor, factor, factor, 1.0])
         return Perception(self.mask, self.keypoints * factor, self.confidence, self.facing,
-                          self.detected, self.model)  # fmt: skip
+                          self.detected, self.model, lm)  # fmt: skip
 
 
 class PoseModel(Protocol):
@@ -218,7 +232,8 @@ class MediaPipePose:
         conf = np.zeros((n, len(JOINTS)))
         facing = np.zeros(n, np.int8)
         detected = np.zeros(n, bool)
-        out = (mask, kps, conf, facing, detected)
+        landmarks = np.full((n, 33, 4), np.nan)
+        out = (mask, kps, conf, facing, detected, landmarks)
         # Forward, then backward over the frames still without a person: the landmark model
         # tracks a person from frame to frame far more reliably than the detector finds one
         # (P3, grey on a grey wall: 58 % of the frames forward, 83 % backward, all together;
@@ -241,19 +256,20 @@ class MediaPipePose:
                                     + share * (done + 1) / n)  # fmt: skip
         if on_progress is not None:
             on_progress("perception", 1.0)
-        return Perception(mask, kps, conf, facing, detected, self.name)
+        return Perception(mask, kps, conf, facing, detected, self.name, landmarks)
 
 
 def _store(result, i: int, out: tuple, size: tuple[int, int]) -> None:
     """Write one MediaPipe result into frame i of ``out`` (mask, keypoints, confidence,
-    facing, detected)."""
+    facing, detected, landmarks)."""
     if result.pose_landmarks is None:
         return
-    mask, kps, conf, facing, detected = out
+    mask, kps, conf, facing, detected, landmarks = out
     h, w = size
     lm = np.array([(p.x * w, p.y * h, p.z * w, p.visibility)
                    for p in result.pose_landmarks.landmark])  # fmt: skip
     kps[i], conf[i] = landmarks_to_joints(lm[:, :2], lm[:, 3])
+    landmarks[i] = lm
     torso = float(np.linalg.norm(lm[11, :2] + lm[12, :2] - lm[23, :2] - lm[24, :2]) / 2)
     facing[i] = facing_from_depths(lm[_NOSE, 2], 0.5 * (lm[_L_EAR, 2] + lm[_R_EAR, 2]), torso)
     if result.segmentation_mask is not None:

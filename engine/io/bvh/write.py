@@ -16,12 +16,25 @@ from engine.body.shapes import BodyShape
 from engine.body.skeleton import BONE_PARENT, JOINTS, PARENTS, PART_BONES, PART_ROOT_JOINT
 from engine.errors import InvalidInput
 
+#: Joint names of the CMU skeleton (Hahne's conversion, ``../shared/data/cmu``) for our joints:
+#: the joints of CMU's that lie where ours do (DESIGN.md's table); the head top is the Head's
+#: End Site there and the Head joint itself here, at the same place (our leaves end at zero).
+CMU_NAMES: dict[str, str] = {
+    "hip": "Hips", "l_hip": "LeftUpLeg", "l_knee": "LeftLeg", "l_ankle": "LeftFoot",
+    "r_hip": "RightUpLeg", "r_knee": "RightLeg", "r_ankle": "RightFoot",
+    "lower_chest": "Spine", "upper_chest": "Spine1", "l_shoulder": "LeftArm",
+    "l_elbow": "LeftForeArm", "l_wrist": "LeftHand", "r_shoulder": "RightArm",
+    "r_elbow": "RightForeArm", "r_wrist": "RightHand", "neck": "Neck1", "head_top": "Head",
+}  # fmt: skip
+
 
 def write_bvh(
     path: str | os.PathLike,
     joints: np.ndarray,
     fps: float,
     shape: BodyShape | None = None,
+    *,
+    names: str = "coach",
 ) -> Path:
     """Write postures of the 17-joint body as a BVH file (metres, our joint names).
 
@@ -46,6 +59,9 @@ def write_bvh(
     shape : BodyShape, optional
         Bone offsets of the default posture; ``BodyShape.from_rest_joints(joints[0])``
         when omitted.
+    names : {"coach", "cmu"}
+        Our joint names, or CMU's (:data:`CMU_NAMES`) so that tools made for the CMU
+        library read the file; :func:`load_reference` reads both.
 
     Returns
     -------
@@ -58,13 +74,16 @@ def write_bvh(
         When ``joints`` is not (T, 17, 3) finite, or ``fps`` is not positive.
     """
     J = _checked(joints, fps)
+    if names not in ("coach", "cmu"):
+        raise InvalidInput(f"names must be 'coach' or 'cmu', got {names!r}")
     if shape is None:
         shape = BodyShape.from_rest_joints(J[0])
-    R_node, names, parents, offsets = _nodes(J, shape)
-    children: dict[int, list[int]] = {j: [] for j in range(len(names))}
-    for j in range(1, len(names)):
+    table = CMU_NAMES if names == "cmu" else {j: j for j in JOINTS}
+    R_node, node_names, parents, offsets = _nodes(J, shape, table)
+    children: dict[int, list[int]] = {j: [] for j in range(len(node_names))}
+    for j in range(1, len(node_names)):
         children[parents[j]].append(j)
-    out = ["HIERARCHY", *_hierarchy(names, offsets, children)]
+    out = ["HIERARCHY", *_hierarchy(node_names, offsets, children)]
     order = _dfs_order(children)
     out += ["MOTION", f"Frames: {J.shape[0]}", f"Frame Time: {1.0 / fps:.10g}"]
     euler = _local_euler_deg(R_node, parents)
@@ -80,7 +99,9 @@ def write_bvh(
 _EXACT_RAD = float(np.radians(0.1))
 
 
-def _nodes(J: np.ndarray, shape: BodyShape) -> tuple[np.ndarray, list[str], list[int], np.ndarray]:
+def _nodes(
+    J: np.ndarray, shape: BodyShape, table: dict[str, str]
+) -> tuple[np.ndarray, list[str], list[int], np.ndarray]:
     """The BVH nodes: the 17 joints, plus a zero-length joint before each bone of a rigid
     multi-bone part (hip, upper chest) that the part's fit does not lay on the bone.
 
@@ -95,7 +116,7 @@ def _nodes(J: np.ndarray, shape: BodyShape) -> tuple[np.ndarray, list[str], list
     R = [np.empty((J.shape[0], 3, 3)) for _ in range(17)]
     for j in range(17):
         R[j] = R_world[:, part_of_joint[j]] if part_of_joint[j] >= 0 else R[PARENTS[j]]
-    names, parents = list(JOINTS), [int(p) for p in PARENTS]
+    names, parents = [table[j] for j in JOINTS], [int(p) for p in PARENTS]
     offsets = [np.zeros(3), *shape.offsets]
     vec = bone_vectors(J)
     for bones in (b for b in PART_BONES if len(b) > 1):
@@ -106,7 +127,7 @@ def _nodes(J: np.ndarray, shape: BodyShape) -> tuple[np.ndarray, list[str], list
             angle = np.arccos(np.clip((np.trace(fix, axis1=-2, axis2=-1) - 1) / 2, -1, 1))
             if angle.max() <= _EXACT_RAD:
                 continue
-            names.append(f"{JOINTS[head]}_to_{JOINTS[b + 1]}")
+            names.append(f"{table[JOINTS[head]]}_to_{table[JOINTS[b + 1]]}")
             parents.append(head)
             offsets.append(np.zeros(3))
             R.append(fix @ R[head])
