@@ -179,6 +179,10 @@ class Analysis(Base):
     #: Times recovery queued the analysis again (its publish, worker or broker message was
     #: lost: app.core.recovery); also the claim that keeps two API processes from both doing it.
     recoveries: Mapped[int] = mapped_column(Integer, default=0, server_default="0")
+    #: The video frames analysed, start..end-1 (one repetition of several); None: the whole
+    #: video, or whatever the engine picks (it analyses the first of several repetitions).
+    frames_start: Mapped[int | None] = mapped_column(Integer, default=None)
+    frames_end: Mapped[int | None] = mapped_column(Integer, default=None)
     idempotency_key: Mapped[str | None] = mapped_column(String(255), default=None)
     #: sha256 hex of what the upload sent under that key (reference, performer, video), so
     #: the key reused for a different upload is refused (None: made before it was kept).

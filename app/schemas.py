@@ -308,6 +308,10 @@ class AnalysisPublic(_Orm):
     message: str
     error: str | None
     timings: dict[str, Any] | None
+    #: The video frames analysed, start..end-1, when the analysis covers one repetition the
+    #: user picked (``POST /analyses/{id}/repetitions/{n}``); null for the whole video.
+    frames_start: int | None = None
+    frames_end: int | None = None
     created_at: datetime
     updated_at: datetime
 

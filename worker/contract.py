@@ -52,6 +52,9 @@ class AnalysisJob:
         upload (None: the engine's name tables).
     reference_units_to_m : float or None
         Metres per BVH unit (None: the engine's guess).
+    frames : list of two ints, or None
+        Analyse video frames ``frames[0]`` .. ``frames[1] - 1`` only (one repetition the user
+        chose); None: the whole video.
     """
 
     analysis_id: str
@@ -62,6 +65,7 @@ class AnalysisJob:
     domain: dict | None = None
     reference_mapping: dict[str, str] | None = None
     reference_units_to_m: float | None = None
+    frames: list[int] | None = None
 
     def to_json(self) -> dict:
         return asdict(self)

@@ -305,10 +305,11 @@ def run_prepare(
         progress.report("prepare", _SPAN["prepare"][0], "preparing")
         started = time.monotonic()
         settings, domain = engine_inputs(job, pipeline)
+        frames = {"frames": (job.frames[0], job.frames[1])} if job.frames else {}
         prepared = pipeline.prepare(
             job.reference_path, job.video_path, settings, domain=domain,
             mapping=job.reference_mapping, units_to_m=job.reference_units_to_m,
-            on_progress=progress,
+            on_progress=progress, **frames,
         )  # fmt: skip
         check_cancel(job)
         write_atomic(paths.prepared, prepared.save)

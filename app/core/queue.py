@@ -75,6 +75,8 @@ def analysis_job(analysis, reference, engine_preset: str = "") -> AnalysisJob:
         domain=engine_domain(config) if config else None,
         reference_mapping=config.get("mapping") or None,
         reference_units_to_m=config.get("units_to_m"),
+        frames=None if analysis.frames_start is None
+        else [int(analysis.frames_start), int(analysis.frames_end)],
     )
 
 

@@ -103,6 +103,18 @@ class Storage:
         os.replace(src, dest)
         return dest
 
+    @staticmethod
+    def share(src: Path, dest: Path) -> Path:
+        """``src`` also at ``dest``: a hard link (no second copy of a video) where the file
+        system allows, a copy elsewhere. Each analysis folder then owns its file, so
+        deleting one analysis never takes another's video."""
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            os.link(src, dest)
+        except OSError:
+            shutil.copyfile(src, dest)
+        return dest
+
     # ---- worker outputs (read side of worker.contract)
     @staticmethod
     def read_json(path: Path) -> dict | None:

@@ -149,6 +149,18 @@ class Fit:
     keypoint_off_frames: int | None = None
 
 
+@dataclass(frozen=True)
+class Repetition:
+    """One performance of the reference in a video that holds several
+    (``summary.repetitions``): file frames start..end-1."""
+
+    start: int
+    end: int
+    start_s: float
+    end_s: float
+    analysed: bool
+
+
 @dataclass(frozen=True, eq=False)
 class ResultSummary:
     """The whole analysis in a few words; every field empty when a result has no summary."""
@@ -160,6 +172,8 @@ class ResultSummary:
     messages: tuple[str, ...] = ()
     fit: Fit | None = None
     outside_expert_range_share: float | None = None
+    repetitions: tuple[Repetition, ...] = ()
+    """Every repetition found, when the video holds more than one; empty otherwise."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -415,7 +429,24 @@ def _summary(v: Any, where: str) -> ResultSummary:
         messages=_opt(m, "messages", where, _strings) or (),
         fit=_opt(m, "fit", where, _fit),
         outside_expert_range_share=_opt(m, "outside_expert_range_share", where, _num),
+        repetitions=tuple(
+            _repetition(r, f"{where}/repetitions/{i}")
+            for i, r in enumerate(_opt(m, "repetitions", where, _list) or ())
+        ),
     )
+
+
+def _repetition(v: Any, where: str) -> Repetition:
+    m = _mapping(v, where)
+    start, end = (_int(_req(m, k, where), f"{where}/{k}") for k in ("start", "end"))
+    if not 0 <= start < end:
+        raise InvalidInput(f"{where}: start..end must be a range of frames, got {start}..{end}")
+    return Repetition(
+        start=start, end=end,
+        start_s=_num(_req(m, "start_s", where), f"{where}/start_s"),
+        end_s=_num(_req(m, "end_s", where), f"{where}/end_s"),
+        analysed=_bool(_req(m, "analysed", where), f"{where}/analysed"),
+    )  # fmt: skip
 
 
 def _fit(v: Any, where: str) -> Fit:

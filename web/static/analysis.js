@@ -154,9 +154,23 @@
     box.hidden = reps.length === 0;
     $("repetition-list").replaceChildren(...reps.map(function (r, i) {
       const text = "Repetition " + (i + 1) + ": " + r.start_s.toFixed(1) + "–" + r.end_s.toFixed(1) + " s" + (r.analysed ? " (analysed)" : "");
-      return coach.el("li", {}, [coach.el("button", { type: "button", class: "link" + (r.analysed ? " current" : ""), text: text,
-        onclick: function () { video.pause(); if (video.readyState > 0) video.currentTime = (r.start + 0.5) / fps; } })]);
+      const watch = coach.el("button", { type: "button", class: "link" + (r.analysed ? " current" : ""), text: text,
+        onclick: function () { video.pause(); if (video.readyState > 0) video.currentTime = (r.start + 0.5) / fps; } });
+      const analyse = r.analysed ? null : coach.el("button", { type: "button", class: "small", text: "Analyse this one",
+            "aria-label": "Analyse repetition " + (i + 1), onclick: function () { analyseRepetition(i + 1, this); } });
+      return coach.el("li", {}, [watch, analyse]);
     }));
+  }
+  // A new analysis of the same video, limited to repetition n; its page takes over.
+  async function analyseRepetition(n, button) {
+    button.disabled = true;
+    try {
+      const created = await coach.api(base + "/repetitions/" + n, { method: "POST" });
+      window.location.href = "/analyses/" + created.id;
+    } catch (e) {
+      button.disabled = false;
+      button.textContent = "Could not start: " + e.message;
+    }
   }
   function frameAtTime(t) {
     const raw = Math.floor(t * fps + 1e-3);

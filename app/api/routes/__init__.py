@@ -11,6 +11,7 @@ from app.api.routes import (
     keys,
     performers,
     references,
+    repetitions,
     session,
     webhooks,
 )
@@ -23,6 +24,7 @@ api_router.include_router(webhooks.router)
 api_router.include_router(performers.router)
 api_router.include_router(references.router)
 api_router.include_router(analyses.router)
+api_router.include_router(repetitions.router)
 api_router.include_router(comments.router)
 api_router.include_router(invites.router)
 api_router.include_router(session.router)

@@ -154,7 +154,7 @@ async def create_analysis(
             response.status_code = 200
             return _replay(existing, idempotency_key or "", fingerprint)
         job = analysis_job(analysis, reference, settings.engine_preset)
-        await _enqueue(session, queue, analysis, job)
+        await enqueue(session, queue, analysis, job)
         response.headers["Location"] = location(request, "read_analysis", analysis_id=analysis.id)
         return analysis
     except BaseException:
@@ -215,7 +215,7 @@ async def _receive_video(
         raise ApiError(422, "invalid_video", str(exc)) from None
 
 
-async def _enqueue(session, queue: JobQueue, analysis: Analysis, job: AnalysisJob) -> None:
+async def enqueue(session, queue: JobQueue, analysis: Analysis, job: AnalysisJob) -> None:
     """Queue the analysis' job. The committed row is the record: a broker that does not take
     the job now gets it from recovery later (app.core.recovery); only a deployment without
     the worker package removes the row (503)."""
