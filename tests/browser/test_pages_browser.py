@@ -355,3 +355,11 @@ def test_one_repetition_of_several_is_shown_where_it_is_in_the_video(server, bro
     assert page.locator("#frame-label").inner_text().startswith("frame 1 /")
     assert canvas_colours(page, "#overlay") == (0, 0)
     page.screenshot(path=str(shots / "repetitions.png"), full_page=True)
+    # the other repetition is analysed on its own: a new analysis of its frames, its page
+    assert reps.first.locator("button", has_text="Analyse this one").count() == 0
+    reps.last.locator("button", has_text="Analyse this one").click()
+    page.wait_for_url(lambda url: "/analyses/" in url and aid not in url)
+    new_id = page.url.rsplit("/", 1)[-1]
+    record = page.evaluate("async (u) => (await fetch(u)).json()", f"/api/v1/analyses/{new_id}")
+    assert (record["frames_start"], record["frames_end"]) == (12, 20)
+    page.evaluate("async (u) => fetch(u, {method: 'DELETE'})", f"/api/v1/analyses/{new_id}")
