@@ -12,7 +12,16 @@ from sqlalchemy import Select, func, select
 from sqlalchemy.orm import Session
 
 from app.core import security
-from app.models import Analysis, ApiKey, Club, Reference, User, WebhookEndpoint, utcnow
+from app.models import (
+    Analysis,
+    ApiKey,
+    Capture,
+    Club,
+    Reference,
+    User,
+    WebhookEndpoint,
+    utcnow,
+)
 
 #: last_used_at is written at most this often per key (one write per request is wasteful).
 LAST_USED_RESOLUTION = timedelta(seconds=60)
@@ -324,3 +333,25 @@ def list_active_analyses(session: Session, *, limit: int = 500) -> list[Analysis
     """Analyses a worker may still be working on (every club: used by the reflector)."""
     stmt = select(Analysis).where(Analysis.status.in_(("queued", "running"))).limit(limit)
     return list(session.scalars(stmt))
+
+
+def get_capture(session: Session, *, club_id: int, capture_id: str) -> Capture | None:
+    row = session.get(Capture, capture_id)
+    return row if row is not None and row.club_id == club_id else None
+
+
+def list_captures(
+    session: Session, *, club_id: int, limit: int, offset: int, performer_id: int | None = None
+) -> tuple[list[Capture], int]:
+    conditions: list[Any] = [Capture.club_id == club_id]
+    if performer_id is not None:
+        conditions.append(Capture.performer_id == performer_id)
+    total = session.scalar(select(func.count()).select_from(Capture).where(*conditions)) or 0
+    stmt = (
+        select(Capture)
+        .where(*conditions)
+        .order_by(Capture.created_at.desc(), Capture.id)
+        .limit(limit)
+        .offset(offset)
+    )
+    return list(session.scalars(stmt)), int(total)

@@ -196,6 +196,34 @@ class Analysis(Base):
     reference: Mapped[Reference] = relationship()
 
 
+class Capture(Base):
+    """A reference-free capture (issue 23): a performer's 3D motion from one video."""
+
+    __tablename__ = "captures"
+    __table_args__ = (Index("ix_captures_club_created", "club_id", "created_at"),)
+
+    id: Mapped[str] = mapped_column(String(36), primary_key=True, default=new_uuid)
+    club_id: Mapped[int] = mapped_column(ForeignKey("clubs.id", ondelete="CASCADE"), index=True)
+    performer_id: Mapped[int] = mapped_column(ForeignKey("users.id"), index=True)
+    name: Mapped[str] = mapped_column(String(200))
+    video_path: Mapped[str] = mapped_column(String(1000))
+    work_dir: Mapped[str] = mapped_column(String(1000))
+    height_m: Mapped[float] = mapped_column(Float, default=1.75)
+    #: The user's answers to the capture's questions: question id -> -1 towards, +1 away.
+    answers: Mapped[dict | None] = mapped_column(JSON, default=None)
+    status: Mapped[str] = mapped_column(String(16), default="queued", index=True)
+    progress: Mapped[float] = mapped_column(Float, default=0.0)
+    message: Mapped[str] = mapped_column(String(1000), default="")
+    error: Mapped[str | None] = mapped_column(Text, default=None)
+    task_id: Mapped[str | None] = mapped_column(String(255), default=None)
+    #: The reference made from this capture ("use as reference"), if any.
+    reference_id: Mapped[int | None] = mapped_column(
+        ForeignKey("references.id", ondelete="SET NULL"), default=None
+    )
+    created_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
+    updated_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow, onupdate=utcnow)
+
+
 class Comment(Base):
     """A coach's (or performer's) note on an analysis, pinned to a video frame or a segment."""
 

@@ -333,6 +333,54 @@ class AnalysesPublic(ListPage[AnalysisPublic]):
     pass
 
 
+# ---- captures
+class CaptureQuestion(BaseModel):
+    """A depth the capture could not settle from the video (or the body's facing)."""
+
+    id: str
+    segment: str
+    frames: list[int]
+    chosen: str
+    margin: float
+    text: str
+
+
+class CapturePublic(_Orm):
+    id: str
+    performer_id: int
+    name: str
+    height_m: float
+    status: AnalysisState
+    progress: float
+    message: str
+    error: str | None
+    answers: dict[str, int] | None
+    reference_id: int | None
+    created_at: datetime
+    updated_at: datetime
+    #: Once done: frames, fps, the questions left (answer them with ``POST .../answers``).
+    frames: int | None = None
+    fps: float | None = None
+    questions: list[CaptureQuestion] = []
+
+
+class CapturesPublic(ListPage[CapturePublic]):
+    pass
+
+
+class CaptureAnswers(BaseModel):
+    """Answers to a capture's questions: question id -> ``towards`` or ``away`` (``yes`` or
+    ``no`` for the facing question)."""
+
+    model_config = ConfigDict(extra="forbid")
+    answers: dict[str, Literal["towards", "away", "yes", "no"]] = Field(max_length=200)
+
+
+class CaptureToReference(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    name: str | None = Field(default=None, min_length=1, max_length=200)
+
+
 class SegmentPublic(BaseModel):
     index: int
     reference_start: int

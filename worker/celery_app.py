@@ -37,7 +37,14 @@ from celery import Celery
 from kombu import pools
 
 from worker import metrics
-from worker.contract import ANALYZE_TASK, AnalysisFolder, AnalysisJob, BrokerTasks
+from worker.contract import (
+    ANALYZE_TASK,
+    CAPTURE_TASK,
+    AnalysisFolder,
+    AnalysisJob,
+    BrokerTasks,
+    CaptureJob,
+)
 from worker.settings import WorkerSettings
 
 log = logging.getLogger("coach.worker")
@@ -147,6 +154,19 @@ def enqueue(job: AnalysisJob) -> str:
     )
     app.send_task(ANALYZE_TASK, args=[job.to_json()], task_id=task_id)
     log.info("analysis.enqueued analysis_id=%s task_id=%s", job.analysis_id, task_id)
+    return task_id
+
+
+def enqueue_capture(job: CaptureJob) -> str:
+    """Queue one reference-free capture; returns its task id. Writes status.json ``queued``
+    first, as :func:`enqueue` does."""
+    from worker import jobs
+
+    task_id = uuid.uuid4().hex
+    jobs.write_status(job.work_dir, "queued", stage="queued", progress=0.0,
+                      message="waiting for a free worker", force=True)  # fmt: skip
+    app.send_task(CAPTURE_TASK, args=[job.to_json()], task_id=task_id)
+    log.info("capture.enqueued capture_id=%s task_id=%s", job.capture_id, task_id)
     return task_id
 
 

@@ -23,6 +23,7 @@ ANALYZE_TASK = "coach.analyze"
 PREPARE_TASK = "coach.stage.prepare"
 CANDIDATES_TASK = "coach.stage.candidates"
 SELECT_TASK = "coach.stage.select"
+CAPTURE_TASK = "coach.capture"
 
 #: The custom Celery state that carries progress meta {"stage", "progress", "message"}.
 PROGRESS_STATE = "PROGRESS"
@@ -148,6 +149,63 @@ class AnalysisFolder:
             p for p in self.stages.iterdir()
             if self._CHUNK.fullmatch(p.name) and not is_temporary(p)
         )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class CaptureJob:
+    """Payload of :data:`CAPTURE_TASK`: a reference-free capture (``engine.capture``).
+
+    Attributes
+    ----------
+    capture_id : str
+    video_path, work_dir : str
+        The performer's video and the capture's folder (:class:`CaptureFolder`).
+    height_m : float
+        The performer's height (bone lengths).
+    answers : dict of str to int
+        The user's answers so far: question id -> -1 (towards the camera) or +1 (away).
+    """
+
+    capture_id: str
+    video_path: str
+    work_dir: str
+    height_m: float = 1.75
+    answers: dict[str, int] = field(default_factory=dict)
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_json(cls, d: dict) -> CaptureJob:
+        known = {f.name for f in fields(cls)}
+        return cls(**{k: v for k, v in d.items() if k in known})
+
+
+class CaptureFolder:
+    """Where one capture keeps its files::
+
+        status.json      as an analysis' (:class:`AnalysisFolder`)
+        video.<ext>      the performer's upload
+        capture.json     the capture's summary: frames, fps, questions, timings
+        motion.bvh       the motion, CMU joint names, root motion, one frame per video frame
+        motion_coach.bvh the same with this project's joint names
+        angles.csv       joint positions and angles per frame
+        heartbeat        renewed while a worker runs the capture
+
+    A new run (answers given) replaces the files; each is written to a ``.tmp`` name first.
+    """
+
+    def __init__(self, work_dir: str | os.PathLike):
+        self.work_dir = Path(work_dir)
+        self.status = self.work_dir / "status.json"
+        self.summary = self.work_dir / "capture.json"
+        self.bvh = self.work_dir / "motion.bvh"
+        self.bvh_coach = self.work_dir / "motion_coach.bvh"
+        self.csv = self.work_dir / "angles.csv"
+        self.heartbeat = self.work_dir / "heartbeat"
+
+    def video(self, suffix: str) -> Path:
+        return self.work_dir / f"video{suffix}"
 
 
 @dataclass(frozen=True)

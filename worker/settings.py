@@ -46,6 +46,8 @@ EMBEDDED = "embedded"
 #: - candidates: one chunk of stage-3 belief propagation; the dominant cost, spread over chunks,
 #:   same ceiling as prepare.
 #: - select: a DP over (t', t, l) per segment, cheap next to stage 3; 10 min.
+#: - capture: a reference-free capture (pose model + lifting), about 0.05 s per frame; a
+#:   two-minute video at 60 fps takes a few minutes, so 15 min.
 #: The hard limit is the soft one plus a minute, so the soft-limit handler has time to record the
 #: failure in status.json before the process is killed.
 DEFAULT_LIMITS_S: dict[str, tuple[int, int]] = {
@@ -53,6 +55,7 @@ DEFAULT_LIMITS_S: dict[str, tuple[int, int]] = {
     "prepare": (30 * 60, 31 * 60),
     "candidates": (30 * 60, 31 * 60),
     "select": (10 * 60, 11 * 60),
+    "capture": (15 * 60, 16 * 60),
 }
 
 

@@ -41,11 +41,13 @@ from worker.celery_app import app, current_settings
 from worker.contract import (
     ANALYZE_TASK,
     CANDIDATES_TASK,
+    CAPTURE_TASK,
     PREPARE_TASK,
     PROGRESS_STATE,
     SELECT_TASK,
     AnalysisFolder,
     AnalysisJob,
+    CaptureJob,
 )
 
 log = logging.getLogger("coach.worker")
@@ -286,3 +288,32 @@ def select(self, job_json: dict, n_chunks: int) -> dict:
 
 def _done(job: AnalysisJob, path) -> dict:
     return {"analysis_id": job.analysis_id, "result_path": str(path)}
+
+
+@app.task(
+    bind=True,
+    name=CAPTURE_TASK,
+    soft_time_limit=_S.limits_for("capture")[0],
+    time_limit=_S.limits_for("capture")[1],
+)
+def capture(self, job_json: dict) -> dict:
+    """A reference-free capture: one task, under the capture folder's heartbeat. Engine
+    errors (no person, unreadable video) are recorded in its status and not retried."""
+    from worker.capture import run_capture  # the capture's engine modules load on use
+
+    job = CaptureJob.from_json(job_json)
+    owner = self.request.id or job.capture_id
+    with lease.Heartbeat(job.work_dir, owner, _S.heartbeat_s):
+        try:
+            path = run_capture(job)
+        except EngineError:
+            return {"capture_id": job.capture_id, "failed": True}
+        except SoftTimeLimitExceeded:
+            error = f"the capture took longer than its limit of {self.soft_time_limit} s"
+            jobs.write_status(job.work_dir, "failed", stage="capture", error=error, force=True)
+            raise
+        except Exception as exc:  # a bug: record it for the user, never retry
+            error = f"internal error in the capture: {exc!r}"
+            jobs.write_status(job.work_dir, "failed", stage="capture", error=error, force=True)
+            raise
+    return {"capture_id": job.capture_id, "summary_path": str(path)}

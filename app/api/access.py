@@ -16,7 +16,7 @@ from app.api.deps import Principal
 from app.api.errors import ApiError, not_found
 from app.core.reflect import Notifier, reflect
 from app.core.storage import Storage
-from app.models import Analysis, Reference, User
+from app.models import Analysis, Capture, Reference, User
 from engine.errors import InvalidInput
 from engine.io.result_reader import Result
 
@@ -32,6 +32,19 @@ def analysis_for(session: Session, who: Principal, analysis_id: str) -> Analysis
     if a is None or (own is not None and a.performer_id != own):
         raise not_found("analysis", analysis_id)
     return a
+
+
+def capture_for(session: Session, who: Principal, capture_id: str) -> Capture:
+    """The capture, if ``who`` may see it; 404 otherwise."""
+    try:
+        uuid.UUID(capture_id)
+    except ValueError:
+        raise not_found("capture", capture_id) from None
+    c = crud.get_capture(session, club_id=who.club.id, capture_id=capture_id)
+    own = who.own_performer_id
+    if c is None or (own is not None and c.performer_id != own):
+        raise not_found("capture", capture_id)
+    return c
 
 
 def reference_for(session: Session, who: Principal, reference_id: int) -> Reference:

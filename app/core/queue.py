@@ -10,7 +10,7 @@ from __future__ import annotations
 from typing import Protocol
 
 from app.core.validation import engine_domain
-from worker.contract import AnalysisJob, BrokerTasks
+from worker.contract import AnalysisJob, BrokerTasks, CaptureJob
 
 
 class QueueUnavailable(Exception):
@@ -24,6 +24,8 @@ class PublishFailed(QueueUnavailable):
 
 class JobQueue(Protocol):
     def enqueue(self, job: AnalysisJob) -> str: ...
+
+    def enqueue_capture(self, job: CaptureJob) -> str: ...
 
     def revoke(self, task_id: str) -> None: ...
 
@@ -42,6 +44,16 @@ class CeleryQueue:
             return str(enqueue(job))
         except Exception as exc:  # kombu/redis raise many types; all mean "not queued"
             raise PublishFailed(f"could not queue the analysis: {exc}") from exc
+
+    def enqueue_capture(self, job: CaptureJob) -> str:
+        try:
+            from worker.celery_app import enqueue_capture
+        except ImportError as exc:
+            raise QueueUnavailable(f"the worker package is not available: {exc}") from exc
+        try:
+            return str(enqueue_capture(job))
+        except Exception as exc:  # kombu/redis raise many types; all mean "not queued"
+            raise QueueUnavailable(f"could not queue the capture: {exc}") from exc
 
     def revoke(self, task_id: str) -> None:
         try:

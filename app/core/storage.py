@@ -92,6 +92,9 @@ class Storage:
     def analysis_dir(self, analysis_id: str) -> Path:
         return self.root / "analyses" / str(uuid.UUID(analysis_id))
 
+    def capture_dir(self, capture_id: str) -> Path:
+        return self.root / "captures" / str(uuid.UUID(capture_id))
+
     @staticmethod
     def video_suffix(filename: str | None) -> str:
         suffix = Path(filename or "").suffix.lower()

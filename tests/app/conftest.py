@@ -28,6 +28,10 @@ class RecordingQueue:
         self.jobs.append(job)
         return f"task-{len(self.jobs)}"
 
+    def enqueue_capture(self, job) -> str:
+        self.jobs.append(job)
+        return f"task-{len(self.jobs)}"
+
     def revoke(self, task_id: str) -> None:
         self.revoked.append(task_id)
 

@@ -137,3 +137,30 @@ def test_engine_end_to_end(worker_env, workers, tmp_path, short_video):
     result = result_without_timing(AnalysisFolder(job.work_dir).result)
     assert len(result["frames"]) == 16
     assert [f["t"] for f in result["frames"]] == list(range(16))
+
+
+def test_capture_through_a_real_worker(worker_env, workers, tmp_path, short_video):
+    """A reference-free capture (issue 23) queued on Redis, run by a real `celery worker`
+    with the real engine; then queued again with an answer, which the worker honours."""
+    from engine.io.bvh import load_reference
+    from worker.contract import CaptureFolder, CaptureJob
+
+    workers.start(concurrency=1)
+    work = tmp_path / "data" / "captures" / "c-1"
+    job = CaptureJob(capture_id="c-1", video_path=str(short_video), work_dir=str(work))
+    task_id = celery_app.enqueue_capture(job)
+    assert jobs.read_status(work)["state"] in ("queued", "running", "done")
+    status = wait_for(str(work), finished, 120, workers)
+    assert status["state"] == "done", status
+    assert celery_app.app.AsyncResult(task_id).state == "SUCCESS"
+    folder = CaptureFolder(work)
+    ref = load_reference(folder.bvh, normalise_heading=False)
+    assert ref.profile == "cmu" and ref.motion.joints.shape == (16, 17, 3)
+    answer = {"l_forearm@0-16": 1}
+    celery_app.enqueue_capture(CaptureJob(**{**job.to_json(), "answers": answer}))
+    status = wait_for(str(work), lambda s: finished(s) and s.get("stage") == "done", 120, workers)
+    import json
+
+    summary = json.loads(folder.summary.read_text())
+    assert summary["answers"] == answer
+    assert "l_forearm@0-16" not in {q["id"] for q in summary["questions"]}

@@ -118,6 +118,32 @@ def upload(request: Request, session: SessionDep):
     )  # fmt: skip
 
 
+@router.get("/captures", response_class=HTMLResponse)
+def captures_page(request: Request, session: SessionDep):
+    """Reference-free 3D capture: the upload form and the user's captures."""
+    user = page_user(request, session)
+    if user is None:
+        return _sign_in(request)
+    performers = (
+        crud.list_performers(session, club_id=user.club_id, limit=1000, offset=0)[0]
+        if user.role == "coach" else []
+    )  # fmt: skip
+    return _render(request, "captures.html", user, performers=performers, capture_id="")
+
+
+@router.get("/captures/{capture_id}", response_class=HTMLResponse)
+def capture_page(request: Request, capture_id: str, session: SessionDep):
+    user = page_user(request, session)
+    if user is None:
+        return _sign_in(request)
+    try:
+        c = access.capture_for(session, principal_of(session, user), capture_id)
+    except ApiError:
+        return _render(request, "message.html", user, 404, title="Not found",
+                       message="There is no such capture in your club.")  # fmt: skip
+    return _render(request, "captures.html", user, performers=[], capture_id=c.id)
+
+
 @router.get("/analyses/{analysis_id}", response_class=HTMLResponse)
 def analysis_page(request: Request, analysis_id: str, session: SessionDep, notifier: NotifierDep):
     return _analysis(request, analysis_id, session, notifier, review=False)

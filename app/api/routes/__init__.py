@@ -4,6 +4,7 @@ from fastapi import APIRouter
 
 from app.api.routes import (
     analyses,
+    captures,
     club,
     comments,
     health,
@@ -25,6 +26,7 @@ api_router.include_router(performers.router)
 api_router.include_router(references.router)
 api_router.include_router(analyses.router)
 api_router.include_router(repetitions.router)
+api_router.include_router(captures.router)
 api_router.include_router(comments.router)
 api_router.include_router(invites.router)
 api_router.include_router(session.router)

@@ -104,7 +104,7 @@ async def create_analysis(
     idempotency_key: IdempotencyKey = None,
 ):
     club = who.club
-    performer_id = _performer_shown(who, performer_id)
+    performer_id = performer_shown(who, performer_id)
     fingerprint = None
     if idempotency_key is not None:
         video_sha256 = await run_in_threadpool(_sha256_of, video.file)
@@ -125,7 +125,7 @@ async def create_analysis(
     work_dir = storage.analysis_dir(analysis_id)
     try:
         upload = tmp / f"video{suffix}"
-        info = await _receive_video(video, upload, storage, settings)
+        info = await receive_video(video, upload, storage, settings)
         video_path = storage.move(upload, AnalysisFolder(work_dir).video(suffix))
         analysis = Analysis(
             id=analysis_id,
@@ -197,7 +197,7 @@ def _replay(existing: Analysis, key: str, fingerprint: str | None) -> Analysis:
     return existing
 
 
-async def _receive_video(
+async def receive_video(
     video: UploadFile, upload: Path, storage: Storage, settings: Settings
 ) -> dict[str, Any]:
     """Stream the upload to ``upload`` within the size limit and probe it: 413 when too
@@ -232,7 +232,7 @@ async def enqueue(session, queue: JobQueue, analysis: Analysis, job: AnalysisJob
     log.info("analysis.queued analysis=%s task=%s", analysis.id, analysis.task_id)
 
 
-def _performer_shown(who: Principal, performer_id: int | None) -> int:
+def performer_shown(who: Principal, performer_id: int | None) -> int:
     """Whom an upload shows: a performer uploads for themselves; a coach and an API key
     name the performer."""
     if who.own_performer_id is not None:

@@ -97,14 +97,14 @@ async def create_reference(
         except InvalidInput as exc:
             raise ApiError(422, "invalid_reference", str(exc)) from None
         label = name or (Path(file.filename or "").stem[:200] or "reference")
-        ref = _add(session, who, storage, label, bvh, domain_config, derived)
+        ref = add_reference(session, who, storage, label, bvh, domain_config, derived)
         response.headers["Location"] = location(request, "read_reference", reference_id=ref.id)
         return ref
     finally:
         Storage.remove(tmp)
 
 
-def _add(session, who, storage: Storage, label: str, bvh: Path, domain_config, derived):
+def add_reference(session, who, storage: Storage, label: str, bvh: Path, domain_config, derived):
     """Record an accepted reference and move its files (``bvh`` and, for one built from
     takes, the ``takes.png`` beside it) into its folder; nothing is left of it on failure."""
     final_dir: Path | None = None
@@ -176,7 +176,8 @@ async def create_reference_from_takes(
         except InvalidInput as exc:
             raise ApiError(422, "invalid_reference", str(exc)) from None
         label = name or ("takes " + ", ".join(derived["takes"]["kept"]))[:200]
-        ref = _add(session, who, storage, label, tmp / "reference.bvh", domain_config, derived)
+        bvh = tmp / "reference.bvh"
+        ref = add_reference(session, who, storage, label, bvh, domain_config, derived)
         response.headers["Location"] = location(request, "read_reference", reference_id=ref.id)
         return ref
     finally:
