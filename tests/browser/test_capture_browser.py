@@ -33,6 +33,9 @@ def test_a_capture_from_upload_to_reference(server, browser, clip, shots):
     coach.locator("#to-reference button").click()
     coach.wait_for_selector("#reference-done:not([hidden])")
     refs = coach.evaluate("async () => (await fetch('/api/v1/references?limit=50')).json()")
-    assert "Olive's swing" in [r["name"] for r in refs["items"]]
+    made = [r["id"] for r in refs["items"] if r["name"] == "Olive's swing"]
+    assert made
+    # leave the shared server's library as the other browser tests expect it
+    coach.evaluate("async (u) => fetch(u, {method: 'DELETE'})", f"/api/v1/references/{made[0]}")
     listed = page.evaluate("async () => (await fetch('/api/v1/captures')).json()")
     assert listed["total"] >= 1
