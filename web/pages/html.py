@@ -103,15 +103,19 @@ def join_page(request: Request, token: str, session: SessionDep):
     )  # fmt: skip
 
 
+def _performers(session, user: User) -> list[User]:
+    """Whom a coach may pick as the person in a video (a performer picks nobody)."""
+    if user.role != "coach":
+        return []
+    return crud.list_performers(session, club_id=user.club_id, limit=1000, offset=0)[0]
+
+
 @router.get("/upload", response_class=HTMLResponse)
 def upload(request: Request, session: SessionDep):
     user = page_user(request, session)
     if user is None:
         return _sign_in(request)
-    performers = (
-        crud.list_performers(session, club_id=user.club_id, limit=1000, offset=0)[0]
-        if user.role == "coach" else []
-    )  # fmt: skip
+    performers = _performers(session, user)
     return _render(
         request, "upload.html", user, performers=performers,
         max_video_bytes=request.app.state.settings.max_video_bytes,
@@ -124,10 +128,7 @@ def captures_page(request: Request, session: SessionDep):
     user = page_user(request, session)
     if user is None:
         return _sign_in(request)
-    performers = (
-        crud.list_performers(session, club_id=user.club_id, limit=1000, offset=0)[0]
-        if user.role == "coach" else []
-    )  # fmt: skip
+    performers = _performers(session, user)
     return _render(request, "captures.html", user, performers=performers, capture_id="")
 
 
