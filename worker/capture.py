@@ -22,28 +22,19 @@ def run_capture(job: CaptureJob) -> Path:
     """Capture the job's video; the summary's path. Engine errors are recorded as the
     capture's failure (with the engine's plain message) and re-raised."""
     folder = CaptureFolder(job.work_dir)
-    jobs.write_status(
-        job.work_dir,
-        "running",
-        stage="capture",
-        progress=0.0,
-        message="finding you in the video",
-        force=True,
-    )
-    started = time.monotonic()
 
+    def running(progress: float, *, force: bool = False) -> None:
+        jobs.write_status(job.work_dir, "running", stage="capture", progress=progress,
+                          message="finding you in the video", force=force)  # fmt: skip
+
+    running(0.0, force=True)
+    started = time.monotonic()
     shown = [-1]
 
     def progress(stage: str, share: float) -> None:
         if int(20 * share) != shown[0]:  # every 5 %, not every frame
             shown[0] = int(20 * share)
-            jobs.write_status(
-                job.work_dir,
-                "running",
-                stage="capture",
-                progress=0.9 * share,
-                message="finding you in the video",
-            )
+            running(0.9 * share)
 
     try:
         cap = capture_video(

@@ -8,6 +8,7 @@ nothing.
 from __future__ import annotations
 
 import uuid
+from typing import Any
 
 from sqlalchemy.orm import Session
 
@@ -21,30 +22,28 @@ from engine.errors import InvalidInput
 from engine.io.result_reader import Result
 
 
+def _own_row(session: Session, who: Principal, kind: str, row_id: str, get) -> Any:
+    """The club's row ``row_id`` (a uuid) from ``get``, if ``who`` may see it (a performer
+    only their own); 404 otherwise."""
+    try:
+        uuid.UUID(row_id)
+    except ValueError:
+        raise not_found(kind, row_id) from None
+    row = get(session, club_id=who.club.id, **{f"{kind}_id": row_id})
+    own = who.own_performer_id
+    if row is None or (own is not None and row.performer_id != own):
+        raise not_found(kind, row_id)
+    return row
+
+
 def analysis_for(session: Session, who: Principal, analysis_id: str) -> Analysis:
     """The analysis, if ``who`` may see it; 404 otherwise."""
-    try:
-        uuid.UUID(analysis_id)
-    except ValueError:
-        raise not_found("analysis", analysis_id) from None
-    a = crud.get_analysis(session, club_id=who.club.id, analysis_id=analysis_id)
-    own = who.own_performer_id
-    if a is None or (own is not None and a.performer_id != own):
-        raise not_found("analysis", analysis_id)
-    return a
+    return _own_row(session, who, "analysis", analysis_id, crud.get_analysis)
 
 
 def capture_for(session: Session, who: Principal, capture_id: str) -> Capture:
     """The capture, if ``who`` may see it; 404 otherwise."""
-    try:
-        uuid.UUID(capture_id)
-    except ValueError:
-        raise not_found("capture", capture_id) from None
-    c = crud.get_capture(session, club_id=who.club.id, capture_id=capture_id)
-    own = who.own_performer_id
-    if c is None or (own is not None and c.performer_id != own):
-        raise not_found("capture", capture_id)
-    return c
+    return _own_row(session, who, "capture", capture_id, crud.get_capture)
 
 
 def reference_for(session: Session, who: Principal, reference_id: int) -> Reference:

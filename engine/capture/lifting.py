@@ -21,7 +21,7 @@ from itertools import product
 
 import numpy as np
 
-from engine.capture.pose2d import P, Pose2D, viterbi
+from engine.capture.pose2d import P, Pose2D, viterbi, zero_phase
 from engine.capture.settings import CaptureSettings
 
 #: Lifted segments: (name, parent point, child point, length of a 1.75 m adult in metres).
@@ -160,9 +160,11 @@ def image_scale(pose: Pose2D, height_m: float) -> tuple[np.ndarray, np.ndarray]:
     A segment's image length is at most s L. Per frame the scale is read from the few long
     segments nearest the image plane (the median of the three largest ratios, robust to one
     misplaced landmark); over time it is the 90th percentile in a one-second window (a body
-    always has segments in depth), smoothed. Lengths are then the prior's, raised to the 95th
-    percentile of what the video shows (at most by 30 %): a body whose hips the camera sees
-    wider than the table's must not have its hips pushed into depth.
+    always has segments in depth), smoothed. Lengths are the 95th percentile of what the video
+    shows, kept within 0.75-1.3 times the table's: a body whose hips the camera sees wider than
+    the table's must not have its hips pushed into depth, and a length well above the bone's
+    (the trunk of a short-waisted body, the table's forearm) tilts it in depth wherever it lies
+    in the image plane.
 
     Returns
     -------
@@ -170,7 +172,7 @@ def image_scale(pose: Pose2D, height_m: float) -> tuple[np.ndarray, np.ndarray]:
     lengths : ndarray, shape (12,)
     """
     prior = _PRIOR_175 * height_m / 1.75
-    l2d = np.linalg.norm(pose.uv[:, _B] - pose.uv[:, _A], axis=-1)  # (T', 12)
+    l2d = _image_lengths(pose)
     ratio = np.sort(l2d[:, _SCALE_SEGMENTS] / prior[_SCALE_SEGMENTS], axis=1)[:, -3:]
     per_frame = np.median(ratio, axis=1)
     half = max(1, int(round(pose.fps / 2)))
@@ -178,18 +180,21 @@ def image_scale(pose: Pose2D, height_m: float) -> tuple[np.ndarray, np.ndarray]:
     windowed = np.array(
         [np.percentile(per_frame[max(0, t - half) : t + half + 1], 90) for t in range(T)]
     )
-    from engine.capture.pose2d import zero_phase
-
     scale = np.maximum(zero_phase(windowed, pose.fps, 0.5), 1e-6)
     seen = np.percentile(l2d / scale[:, None], 95, axis=0)
     lengths = np.clip(seen, 0.75 * prior, 1.3 * prior)
     return scale, lengths
 
 
+def _image_lengths(pose: Pose2D) -> np.ndarray:
+    """Each segment's length in the image (T', 12), pixels."""
+    return np.linalg.norm(pose.uv[:, _B] - pose.uv[:, _A], axis=-1)
+
+
 def depth_magnitudes(pose: Pose2D, scale: np.ndarray, lengths: np.ndarray) -> np.ndarray:
     """|dz| of every segment (T', 12), metres (seed 001 eq. 2.2); 0 where the image length
     exceeds the bone's (noise, or a wrong length)."""
-    l2d = np.linalg.norm(pose.uv[:, _B] - pose.uv[:, _A], axis=-1) / scale[:, None]
+    l2d = _image_lengths(pose) / scale[:, None]
     return np.sqrt(np.maximum(lengths[None] ** 2 - l2d**2, 0.0))
 
 
