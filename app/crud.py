@@ -306,8 +306,12 @@ def list_analyses(
     status: str | None = None,
     created_after: datetime | None = None,
     created_before: datetime | None = None,
+    reviewed: bool | None = None,
 ) -> tuple[list[Analysis], int]:
     conditions: list[Any] = [Analysis.club_id == club_id]
+    if reviewed is not None:
+        conditions.append(Analysis.reviewed_at.is_not(None) if reviewed
+                          else Analysis.reviewed_at.is_(None))  # fmt: skip
     if performer_id is not None:
         conditions.append(Analysis.performer_id == performer_id)
     if reference_id is not None:

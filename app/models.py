@@ -187,13 +187,22 @@ class Analysis(Base):
     #: sha256 hex of what the upload sent under that key (reference, performer, video), so
     #: the key reused for a different upload is refused (None: made before it was kept).
     idempotency_fingerprint: Mapped[str | None] = mapped_column(String(64), default=None)
+    #: The headline of a done analysis: its mean posture error eps_t' over the frames, kept
+    #: here (set when the result is reflected) so that lists need not read every result.
+    mean_error_deg: Mapped[float | None] = mapped_column(Float, default=None)
+    #: The coach's "reviewed" mark (None: still to review), and who set it.
+    reviewed_at: Mapped[datetime | None] = mapped_column(UTCDateTime(), default=None)
+    reviewed_by_id: Mapped[int | None] = mapped_column(
+        ForeignKey("users.id", ondelete="SET NULL", name="fk_analyses_reviewed_by"), default=None
+    )
     #: Set when the completion webhook was handed to the sender (so it fires once).
     notified_at: Mapped[datetime | None] = mapped_column(UTCDateTime(), default=None)
     created_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
     updated_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow, onupdate=utcnow)
 
-    performer: Mapped[User] = relationship()
+    performer: Mapped[User] = relationship(foreign_keys=[performer_id])
     reference: Mapped[Reference] = relationship()
+    reviewed_by: Mapped[User | None] = relationship(foreign_keys=[reviewed_by_id])
 
 
 class Capture(Base):

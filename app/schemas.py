@@ -312,6 +312,11 @@ class AnalysisPublic(_Orm):
     #: user picked (``POST /analyses/{id}/repetitions/{n}``); null for the whole video.
     frames_start: int | None = None
     frames_end: int | None = None
+    #: The headline once done: the mean posture error over the frames, in degrees.
+    mean_error_deg: float | None = None
+    #: When a coach marked the analysis reviewed (null: still to review), and who.
+    reviewed_at: datetime | None = None
+    reviewed_by_id: int | None = None
     created_at: datetime
     updated_at: datetime
 

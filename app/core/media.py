@@ -95,6 +95,52 @@ def _transcode(src: Path, dst: Path) -> None:
             out.mux(pkt)
 
 
+#: Width of the list pages' thumbnails (twice their CSS size, for high-density screens).
+THUMBNAIL_WIDTH = 160
+
+
+def video_thumbnail(video_path: str | Path, work_dir: str | Path, frame: int = 0) -> Path:
+    """A small JPEG of video frame ``frame`` (rotation applied, as the page shows it) at
+    ``<work_dir>/web/thumbnail.jpg``, made on first use.
+
+    Raises
+    ------
+    ValueError
+        The video holds no frame ``frame``, or cannot be decoded.
+    """
+    out = Path(work_dir) / "web" / "thumbnail.jpg"
+    if out.is_file():
+        return out
+    import av
+    import cv2
+
+    with _lock_for(str(out)):
+        if out.is_file():
+            return out
+        rgb = None
+        with av.open(str(video_path)) as inp:
+            for t, f in enumerate(inp.decode(inp.streams.video[0])):
+                if t == frame:
+                    rgb = f.to_ndarray(format="rgb24")
+                    rot = int(getattr(f, "rotation", 0) or 0) % 360
+                    if rot:
+                        rgb = np.ascontiguousarray(np.rot90(rgb, k=rot // 90))
+                    break
+        if rgb is None:
+            raise ValueError(f"the video has no frame {frame}")
+        h, w = rgb.shape[:2]
+        small = cv2.resize(rgb, (THUMBNAIL_WIDTH, max(1, round(h * THUMBNAIL_WIDTH / w))),
+                           interpolation=cv2.INTER_AREA)  # fmt: skip
+        ok, buf = cv2.imencode(".jpg", cv2.cvtColor(small, cv2.COLOR_RGB2BGR))
+        if not ok:
+            raise ValueError("the frame cannot be encoded")
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = out.with_name(f".thumbnail.{os.getpid()}.{threading.get_ident()}.jpg")
+        tmp.write_bytes(buf.tobytes())
+        os.replace(tmp, out)
+    return out
+
+
 # ---- skeleton pictures
 @lru_cache(maxsize=16)
 def _reference_joints(path: str, mtime: float) -> np.ndarray:

@@ -15,6 +15,7 @@ import threading
 import time
 import uuid
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import httpx
@@ -23,11 +24,13 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from app import crud
 from app.core import webhooks
+from app.core.compare import mean_error_deg
 from app.core.config import Settings
 from app.core.security import sign_webhook
 from app.core.storage import Storage
 from app.models import ANALYSIS_STATES, TERMINAL_STATES, Analysis, utcnow
 from app.schemas import AnalysisPublic
+from engine.errors import InvalidInput
 from worker.contract import AnalysisFolder
 
 log = logging.getLogger("app.reflect")
@@ -41,10 +44,32 @@ def _text(value: Any, limit: int) -> str:
     return str(value)[:limit] if value is not None else ""
 
 
+def headline_error(result: dict[str, Any]) -> float | None:
+    """The mean posture error of a result document, None when it has none or is malformed
+    (the result page then says what is wrong with it)."""
+    try:
+        return mean_error_deg(result)
+    except InvalidInput:
+        return None
+
+
+def _fill_headline(session: Session, analysis: Analysis) -> bool:
+    """A done analysis from before the headline was kept gets it once, from its result."""
+    if analysis.status != "done" or analysis.mean_error_deg is not None:
+        return False
+    result = Storage.read_json(Path(analysis.result_path)) if analysis.result_path else None
+    value = headline_error(result) if isinstance(result, dict) else None
+    if value is None:
+        return False
+    analysis.mean_error_deg = value
+    session.commit()
+    return True
+
+
 def reflect(session: Session, analysis: Analysis, *, on_final: OnFinal | None = None) -> bool:
     """Update ``analysis`` from its folder; returns True when the row changed."""
     if analysis.status in TERMINAL_STATES:
-        return False
+        return _fill_headline(session, analysis)
     folder = AnalysisFolder(analysis.work_dir)
     status = Storage.read_json(folder.status) or {}
     result_file = folder.result
@@ -66,6 +91,7 @@ def reflect(session: Session, analysis: Analysis, *, on_final: OnFinal | None = 
             values.update(status="done", progress=1.0, result_path=str(result_file))
             timing = result.get("timing_s")
             values["timings"] = timing if isinstance(timing, dict) else None
+            values["mean_error_deg"] = headline_error(result)
     if state == "done" and "result_path" not in values:
         values["status"] = analysis.status  # done without a readable result: wait for it
     if all(getattr(analysis, k) == v for k, v in values.items()):

@@ -70,7 +70,7 @@ def test_3d_view_frames_the_body_with_the_panel_collapsed(
 def test_reference_picker_preview_loops(server, browser, shots):
     ctx = browser.new_context(viewport={"width": 1280, "height": 900})
     page = ctx.new_page()
-    sign_in(page, server.url, "olive@example.com")
+    sign_in(page, server.url, "olive@example.com", next_path="/upload")
     canvas = page.locator(".ref-option canvas[data-ready=true]").first
     canvas.wait_for()
     a = canvas.screenshot()
@@ -146,7 +146,7 @@ def test_printable_report_has_stills_and_segment_table(server, browser, clip, cl
 def test_upload_errors_are_shown_next_to_the_file_input(server, browser, shots, tmp_path):
     ctx = browser.new_context(viewport={"width": 1000, "height": 900})
     page = ctx.new_page()
-    sign_in(page, server.url, "pat@example.com")
+    sign_in(page, server.url, "pat@example.com", next_path="/upload")
     page.wait_for_selector(".ref-option input")
     # Not a video by type: refused before upload.
     text = tmp_path / "notes.txt"

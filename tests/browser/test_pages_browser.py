@@ -69,7 +69,9 @@ def test_upload_through_the_page_runs_to_results(server, browser, clip, shots):
     ctx = browser.new_context(viewport={"width": 1280, "height": 900})
     page = ctx.new_page()
     sign_in(page, server.url, "pat@example.com")
-    assert page.url.endswith("/upload")
+    assert page.url.endswith("/analyses")  # a performer's home: their attempts
+    page.get_by_role("navigation", name="Main").get_by_role("link", name="New analysis").click()
+    page.wait_for_url("**/upload")
     page.wait_for_selector(".ref-option canvas[data-ready=true]")
     # the demo reference's segments, detected when it was added (unnamed: counted)
     demo = page.locator(".ref-option", has_text="CMU 64_29")
@@ -308,7 +310,7 @@ def test_phone_layout_upload_page(server, browser, shots):
         viewport={"width": 390, "height": 844}, is_mobile=True, has_touch=True
     )
     page = ctx.new_page()
-    sign_in(page, server.url, "pat@example.com")
+    sign_in(page, server.url, "pat@example.com", next_path="/upload")
     page.wait_for_selector(".ref-option canvas[data-ready=true]")
     assert page.locator("#video").get_attribute("accept") == "video/*"
     assert page.locator("#video").get_attribute("capture") is not None

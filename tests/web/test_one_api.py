@@ -58,7 +58,9 @@ def test_a_performer_sees_and_does_only_their_own(env):  # noqa: F811
         assert client.get(path).status_code == 404, path
     assert client.get(f"/api/v1/performers/{ids['perf']}/history").status_code == 200
     # a coach's powers are refused with 403
-    assert client.delete(f"/api/v1/analyses/{mine}").status_code == 403
+    assert client.put(f"/api/v1/analyses/{mine}/reviewed").status_code == 403
+    # their own attempts are theirs to delete; another's is not even seen
+    assert client.delete(f"/api/v1/analyses/{theirs}").status_code == 404
     assert client.get("/api/v1/club").status_code == 403
     assert client.post("/api/v1/invites", json={}).status_code == 403
     r = client.put(f"/api/v1/references/{ids['ref']}/domain", json={"segment_names": []})
@@ -70,6 +72,8 @@ def test_a_performer_sees_and_does_only_their_own(env):  # noqa: F811
                         files={"video": ("clip.mp4", f, "video/mp4")})  # fmt: skip
     assert r.status_code == 201, r.text
     assert r.json()["performer_id"] == ids["perf"] and queue.jobs
+    assert client.delete(f"/api/v1/analyses/{mine}").status_code == 204
+    assert client.get(f"/api/v1/analyses/{mine}").status_code == 404
 
 
 def test_an_upload_must_say_whom_it_shows(env):  # noqa: F811

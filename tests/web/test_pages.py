@@ -129,7 +129,7 @@ def test_pages_redirect_to_sign_in_and_by_role(env):
     assert r.status_code == 303 and r.headers["location"].startswith("/login?next=")
     assert "Sign in" in client.get("/login").text
     sign_in(client, "p@a.org")
-    assert client.get("/", follow_redirects=False).headers["location"] == "/upload"
+    assert client.get("/", follow_redirects=False).headers["location"] == "/analyses"
     assert client.get("/references").status_code == 403
     sign_in(client, "c@a.org")
     assert client.get("/", follow_redirects=False).headers["location"] == "/dashboard"

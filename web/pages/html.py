@@ -79,7 +79,31 @@ def home(request: Request, session: SessionDep):
     user = page_user(request, session)
     if user is None:
         return _sign_in(request)
-    return RedirectResponse("/dashboard" if user.role == "coach" else "/upload", status_code=303)
+    return RedirectResponse("/dashboard" if user.role == "coach" else "/analyses", status_code=303)
+
+
+@router.get("/analyses", response_class=HTMLResponse)
+def my_analyses(
+    request: Request,
+    session: SessionDep,
+    notifier: NotifierDep,
+    offset: Annotated[int, Query(ge=0, le=1_000_000)] = 0,
+):
+    """A performer's own attempts, newest first (a coach has the dashboard)."""
+    user = page_user(request, session)
+    if user is None:
+        return _sign_in(request)
+    if user.role == "coach":
+        return RedirectResponse("/dashboard", status_code=303)
+    limit = 50
+    items, total = crud.list_analyses(
+        session, club_id=user.club_id, performer_id=user.id, limit=limit, offset=offset
+    )
+    for a in items:
+        reflect(session, a, on_final=notifier)
+    return _render(
+        request, "analyses.html", user, items=items, total=total, offset=offset, limit=limit
+    )
 
 
 @router.get("/login", response_class=HTMLResponse)
@@ -215,6 +239,7 @@ def dashboard(
     status: Annotated[str, Query(max_length=16)] = "",
     since: Annotated[str, Query(max_length=10)] = "",
     until: Annotated[str, Query(max_length=10)] = "",
+    review: Annotated[str, Query(max_length=10)] = "",
     offset: Annotated[int, Query(ge=0, le=1_000_000)] = 0,
 ):
     user = page_user(request, session)
@@ -227,15 +252,17 @@ def dashboard(
         session, club_id=user.club_id, limit=limit, offset=offset,
         performer_id=int(performer) if performer.isdigit() else None,
         reference_id=int(reference) if reference.isdigit() else None,
-        status=status if status in ANALYSIS_STATES else None,
+        # "to review" means finished and not yet reviewed
+        status=status if status in ANALYSIS_STATES else ("done" if review == "to_review" else None),
         created_after=_date(since, end=False), created_before=_date(until, end=True),
+        reviewed={"to_review": False, "reviewed": True}.get(review),
     )  # fmt: skip
     for a in items:
         reflect(session, a, on_final=notifier)
     performers = crud.list_performers(session, club_id=user.club_id, limit=1000, offset=0)[0]
     references = crud.list_references(session, club_id=user.club_id, limit=1000, offset=0)[0]
     query = {"performer": performer, "reference": reference, "status": status,
-             "since": since, "until": until}  # fmt: skip
+             "since": since, "until": until, "review": review}  # fmt: skip
     return _render(
         request, "dashboard.html", user, items=items, total=total, offset=offset, limit=limit,
         performers=performers, references=references, states=ANALYSIS_STATES, query=query,

@@ -524,6 +524,20 @@
     }
   }
 
+  // ---------------------------------------------------------------- review mark (coach)
+  const toggle = $("review-toggle");
+  if (toggle) toggle.addEventListener("click", async function () {
+    const on = toggle.dataset.reviewed !== "true";
+    try {
+      const a = await coach.api(base + "/reviewed", { method: on ? "PUT" : "DELETE" });
+      toggle.dataset.reviewed = a.reviewed_at ? "true" : "false";
+      toggle.textContent = a.reviewed_at ? "Put back on the to-review list" : "Mark reviewed";
+      $("review-state").textContent = a.reviewed_at
+        ? "Reviewed on " + a.reviewed_at.slice(0, 10) + "."
+        : "Not reviewed yet: it is on the dashboard's to-review list.";
+    } catch (e) { $("review-state").textContent = e.message; }
+  });
+
   // ---------------------------------------------------------------- start
   if (root.dataset.status === "done") loadResults();
   else if (root.dataset.status === "queued" || root.dataset.status === "running") { follow(); followLive(); }

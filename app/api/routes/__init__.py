@@ -13,6 +13,7 @@ from app.api.routes import (
     performers,
     references,
     repetitions,
+    reviews,
     session,
     webhooks,
 )
@@ -26,6 +27,7 @@ api_router.include_router(performers.router)
 api_router.include_router(references.router)
 api_router.include_router(analyses.router)
 api_router.include_router(repetitions.router)
+api_router.include_router(reviews.router)
 api_router.include_router(captures.router)
 api_router.include_router(comments.router)
 api_router.include_router(invites.router)

@@ -19,7 +19,6 @@ from app import crud
 from app.api.access import analysis_for, done_analysis, reference_for, result_of
 from app.api.deps import (
     CREATED,
-    CurrentCoach,
     CurrentPrincipal,
     NotifierDep,
     PageDep,
@@ -262,6 +261,9 @@ def list_analyses(
         Instant | None,
         Query(description="Created before this ISO 8601 date-time (no zone: UTC)."),
     ] = None,
+    reviewed: Annotated[
+        bool | None, Query(description="Only those a coach has (true) or has not (false) reviewed.")
+    ] = None,
 ):
     own = who.own_performer_id
     if own is not None and performer_id not in (None, own):
@@ -276,6 +278,7 @@ def list_analyses(
         status=status,
         created_after=created_after,
         created_before=created_before,
+        reviewed=reviewed,
     )
     for a in items:
         reflect(session, a, on_final=notifier)
@@ -345,6 +348,22 @@ def read_summary(
 ) -> dict[str, Any]:
     analysis = done_analysis(session, who, analysis_id, notifier)
     return summary.page_summary(analysis, result_of(analysis))
+
+
+@router.get(
+    "/{analysis_id}/thumbnail.jpg", summary="A small picture of the video's first analysed frame",
+    responses={200: {"content": {"image/jpeg": {}}}} | errors(404, 422),
+)  # fmt: skip
+async def read_thumbnail(analysis_id: str, who: CurrentPrincipal, session: SessionDep):
+    a = analysis_for(session, who, analysis_id)
+    try:
+        path = await run_in_threadpool(
+            media.video_thumbnail, a.video_path, a.work_dir, a.frames_start or 0
+        )
+    except Exception as exc:  # a broken upload: the list shows no picture, not a 500
+        log.warning("analysis.thumbnail_failed analysis=%s error=%s", a.id, exc)
+        raise ApiError(422, "invalid_video", "no picture can be made of this video") from None
+    return FileResponse(path, media_type="image/jpeg")
 
 
 @router.get(
@@ -425,11 +444,12 @@ def cancel_analysis(
 
 
 @router.delete(
-    "/{analysis_id}", status_code=204, summary="Delete an analysis and its files",
+    "/{analysis_id}", status_code=204,
+    summary="Delete an analysis and its files (a coach any, a performer their own)",
     responses=errors(404),
 )  # fmt: skip
 def delete_analysis(
-    analysis_id: str, who: CurrentCoach, session: SessionDep, storage: StorageDep,
+    analysis_id: str, who: CurrentPrincipal, session: SessionDep, storage: StorageDep,
     queue: QueueDep,
 ) -> Response:  # fmt: skip
     analysis = analysis_for(session, who, analysis_id)
