@@ -115,7 +115,7 @@ def test_invite_link_signs_a_new_performer_in_once(server, browser, shots):
     r = again.goto(url)
     assert r.status == 410 and "already been used" in again.content()
     sign_in(again, server.url, "nina@example.com", "nina-password-1")
-    assert again.url.endswith("/upload")
+    assert again.url.endswith("/analyses")  # a performer's home: their attempts
     again.context.close()
 
 
