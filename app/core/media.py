@@ -12,7 +12,7 @@ import csv
 import io
 import os
 import threading
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from fractions import Fraction
 from functools import lru_cache
 from pathlib import Path
@@ -44,16 +44,23 @@ def playable_video(video_path: str | Path, work_dir: str | Path) -> Path:
     one by one (no whole-video array in memory), rotation metadata applied, one output frame
     per decoded frame so that frame t' of the result is at t' / fps in the browser.
     """
-    out = Path(work_dir) / "web" / "video.mp4"
+    return _made_once(
+        Path(work_dir) / "web" / "video.mp4", lambda tmp: _transcode(Path(video_path), tmp)
+    )
+
+
+def _made_once(out: Path, write: Callable[[Path], None]) -> Path:
+    """``out``, written by ``write(tmp)`` on first use: one writer per file at a time, and
+    an atomic rename so that readers never see half a file."""
     if out.is_file():
         return out
     with _lock_for(str(out)):
         if out.is_file():
             return out
         out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = out.with_name(f".video.{os.getpid()}.{threading.get_ident()}.mp4")
+        tmp = out.with_name(f".{out.stem}.{os.getpid()}.{threading.get_ident()}{out.suffix}")
         try:
-            _transcode(Path(video_path), tmp)
+            write(tmp)
             os.replace(tmp, out)
         finally:
             tmp.unlink(missing_ok=True)
@@ -108,15 +115,10 @@ def video_thumbnail(video_path: str | Path, work_dir: str | Path, frame: int = 0
     ValueError
         The video holds no frame ``frame``, or cannot be decoded.
     """
-    out = Path(work_dir) / "web" / "thumbnail.jpg"
-    if out.is_file():
-        return out
     import av
     import cv2
 
-    with _lock_for(str(out)):
-        if out.is_file():
-            return out
+    def write(tmp: Path) -> None:
         rgb = None
         with av.open(str(video_path)) as inp:
             for t, f in enumerate(inp.decode(inp.streams.video[0])):
@@ -134,11 +136,9 @@ def video_thumbnail(video_path: str | Path, work_dir: str | Path, frame: int = 0
         ok, buf = cv2.imencode(".jpg", cv2.cvtColor(small, cv2.COLOR_RGB2BGR))
         if not ok:
             raise ValueError("the frame cannot be encoded")
-        out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = out.with_name(f".thumbnail.{os.getpid()}.{threading.get_ident()}.jpg")
         tmp.write_bytes(buf.tobytes())
-        os.replace(tmp, out)
-    return out
+
+    return _made_once(Path(work_dir) / "web" / "thumbnail.jpg", write)
 
 
 # ---- skeleton pictures
