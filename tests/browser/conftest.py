@@ -167,6 +167,16 @@ def shots() -> Path:
     return SCREENSHOTS
 
 
+def analysis_diagnosis(page, server: Server) -> str:
+    """What the API says of the analysis the page shows, and the end of the server's log: the
+    message of a browser test that waited in vain for a result."""
+    aid = page.url.rstrip("/").split("/")[-1]
+    status = page.request.get(f"{server.url}/api/v1/analyses/{aid}").text()
+    log = (server.data_dir / "serve.log").read_text(errors="replace").splitlines()
+    shown = page.locator("#analysis").get_attribute("data-status")
+    return f"page status {shown!r}; API: {status}\nserve.log (end):\n" + "\n".join(log[-60:])
+
+
 def sign_in(page, base: str, email: str, password: str = PASSWORD, *, next_path: str = "/"):
     page.goto(f"{base}/login?next={next_path}")
     page.get_by_label("Email").fill(email)

@@ -9,9 +9,10 @@ import re
 
 import numpy as np
 import pytest
+from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
 from app.core import media
-from tests.browser.conftest import COACH, sign_in
+from tests.browser.conftest import COACH, analysis_diagnosis, sign_in
 
 pytestmark = pytest.mark.browser
 
@@ -83,7 +84,10 @@ def test_upload_through_the_page_runs_to_results(server, browser, clip, shots):
     page.wait_for_function("() => document.getElementById('stage-bar').value > 0", timeout=60_000)
     page.screenshot(path=str(shots / "progress.png"), full_page=True)
     assert page.locator("#stage-pct").inner_text().endswith("% overall")
-    wait_results(page, timeout_ms=170_000)
+    try:
+        wait_results(page, timeout_ms=170_000)
+    except PlaywrightTimeout as e:
+        raise AssertionError(analysis_diagnosis(page, server)) from e
     assert page.locator("#progress-view").is_hidden()
     # stage names came over the stream, said in the performer's words
     stages = page.locator("#stage-list li").all_inner_texts()
