@@ -18,7 +18,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from engine.body.skeleton import BONE_CHILD, BONE_NAMES, BONE_PARENT
+from engine.body.skeleton import BONE_CHILD, BONE_LABELS, BONE_PARENT
 from engine.io.result_reader import Result, as_result
 
 #: Error (deg) at which a bone is fully red in the overlays and the 3D view.
@@ -32,6 +32,17 @@ ONE_CAMERA_NOTE = (
     "from the camera hardly at all, so errors that lie in depth are under-reported. Trust "
     "which frames and bones stand out more than the degrees."
 )
+
+
+def tempo_words(ratio: float | None) -> str:
+    """A segment's tempo (performer's duration / expert's) in the one wording every page,
+    report and export uses: "12 % slower than the expert", "the expert's tempo"."""
+    if ratio is None or not np.isfinite(ratio) or ratio <= 0:
+        return "tempo unknown"
+    pct = round(abs(ratio - 1.0) * 100)
+    if pct == 0:
+        return "the expert's tempo"
+    return f"{pct} % {'slower' if ratio > 1 else 'faster'} than the expert"
 
 
 def error_colors(errors_deg: np.ndarray, red_at_deg: float = ERROR_RED_DEG) -> np.ndarray:
@@ -88,7 +99,7 @@ def draw_skeleton(
     colors = (error_colors(bone_errors_deg) * 255).astype(int)
     thick = max(1, round(out.shape[0] / 120))
     pts = np.round(np.asarray(joints_2d, float)).astype(int)
-    for b in range(len(BONE_NAMES)):
+    for b in range(len(BONE_LABELS)):
         p, c = pts[BONE_PARENT[b]], pts[BONE_CHILD[b]]
         cv2.line(
             out,
@@ -102,7 +113,7 @@ def draw_skeleton(
         cv2.circle(out, (int(p[0]), int(p[1])), thick, (255, 255, 255), -1, cv2.LINE_AA)
     if video_suggests is not None:
         g = np.asarray(video_suggests, float)
-        for b in range(len(BONE_NAMES)):
+        for b in range(len(BONE_LABELS)):
             _dashed_line(out, g[BONE_PARENT[b]], g[BONE_CHILD[b]], MISFIT_RGB, thick, 4 * thick)
     return out
 
@@ -204,17 +215,16 @@ def _segment_rows(result: Result) -> str:
     rows = []
     for j, s in enumerate(result.segments):
         worst = ", ".join(
-            f"{e(BONE_NAMES[b])} ({s.bone_mean_errors_deg[b]:.0f}&deg;)"
+            f"{e(BONE_LABELS[b])} ({s.bone_mean_errors_deg[b]:.0f}&deg;)"
             for b in np.argsort(-s.bone_mean_errors_deg)[:3]
         )
         status = s.status or "ok"
         score = "&ndash;" if s.score_deg is None else f"{s.score_deg:.1f}"
-        tempo = float("nan") if s.tempo is None else s.tempo
         rows.append(
             f"<tr class='{e(status)}'><td>{e(str(j + 1) if s.name is None else s.name)}</td>"
             f"<td>{s.reference_start}&ndash;{s.reference_end}</td>"
             f"<td>{s.performer_start}&ndash;{s.performer_end}</td>"
-            f"<td>{tempo:.2f}</td><td>{s.mean_error_deg:.1f}</td>"
+            f"<td>{e(tempo_words(s.tempo))}</td><td>{s.mean_error_deg:.1f}</td>"
             f"<td>{score}</td><td>{e(status)}</td><td>{worst}</td></tr>"
         )
     return "".join(rows)

@@ -19,6 +19,7 @@ from typing import Any
 from app.core.summary import summarise_segments
 from engine.errors import InvalidInput
 from engine.io.result_reader import Result, as_result, read_result
+from engine.report import tempo_words
 
 #: A change smaller than this (degrees, or tempo ratio x 100 %) counts as "about the same".
 SAME_ERROR_DEG = 1.0
@@ -88,9 +89,10 @@ def compare_results(
     -------
     dict
         ``mean`` ({a, b, change}), ``segments`` (one per segment index in either result:
-        ``name``, ``a`` and ``b`` with ``mean_error_deg``, ``tempo_ratio``, ``reference_start``,
-        ``reference_end`` (or None when that attempt lacks the segment), ``error_change_deg``
-        (b - a), ``error_change`` and ``tempo_change`` ("better", "worse", "same" or None)),
+        ``name``, ``a`` and ``b`` with ``mean_error_deg``, ``tempo_ratio``, ``tempo_text``,
+        ``reference_start``, ``reference_end`` (or None when that attempt lacks the segment),
+        ``error_change_deg`` (b - a), ``error_change`` and ``tempo_change`` ("better",
+        "worse", "same" or None)),
         ``curves`` ({a, b}: :func:`error_curve`) and ``reference_frames`` ([first, last]
         reference frame either curve covers).
     """
@@ -104,6 +106,7 @@ def compare_results(
             sides[key] = None if s is None else {
                 "mean_error_deg": round(s.mean_error_deg, 3),
                 "tempo_ratio": None if s.tempo_ratio is None else round(s.tempo_ratio, 4),
+                "tempo_text": tempo_words(s.tempo_ratio),
                 "reference_start": s.reference_start, "reference_end": s.reference_end,
                 "performer_start": s.performer_start, "performer_end": s.performer_end,
             }  # fmt: skip

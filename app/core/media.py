@@ -21,7 +21,14 @@ from typing import Any
 import numpy as np
 
 from engine.body.limits import JOINT_ANGLES, joint_angles_deg
-from engine.body.skeleton import BONE_CHILD, BONE_NAMES, BONE_PARENT, JOINTS
+from engine.body.skeleton import (
+    BONE_CHILD,
+    BONE_LABELS,
+    BONE_NAMES,
+    BONE_PARENT,
+    JOINTS,
+    column_name,
+)
 from engine.io.result_reader import Result, as_result
 from engine.report import MISFIT_RGB
 
@@ -360,17 +367,18 @@ def report_stills(
 
 # ---- exports
 def result_csv(result: Result | Mapping[str, Any]) -> str:
-    """One row per video frame: timing, errors per bone, each bone's range over the
-    candidates the video cannot tell apart (``range_deg:BONE`` as ``lo-hi``; empty for
-    results that predate it), the performer's joint angles."""
+    """One row per video frame: timing, errors per bone (``error_deg_left_upper_arm``), each
+    bone's range over the candidates the video cannot tell apart (``range_deg_...`` as
+    ``lo-hi``; empty for results that predate it), the performer's joint angles
+    (``angle_deg_left_knee``): every column named once, in a coach's words."""
     result = as_result(result)
     frames = result.frames
     buf = io.StringIO()
     w = csv.writer(buf)
     w.writerow(
         ["t", "time_s", "reference_frame", "selected", "posture_error_deg"]
-        + [f"error_deg:{b}" for b in BONE_NAMES]
-        + [f"range_deg:{b}" for b in BONE_NAMES]
+        + [f"error_deg_{column_name(b)}" for b in BONE_LABELS]
+        + [f"range_deg_{column_name(b)}" for b in BONE_LABELS]
         + [a[0] for a in JOINT_ANGLES]
     )
     fps = result.video.fps or 1.0

@@ -16,9 +16,10 @@ from app import models
 from app.api.errors import ApiError
 from app.models import Analysis, Reference
 from app.schemas import SegmentPublic
-from engine.body.skeleton import BONE_CHILD, BONE_NAMES, BONE_PARENT
+from engine.body.skeleton import BONE_CHILD, BONE_LABELS, BONE_NAMES, BONE_PARENT, bone_label
 from engine.errors import InvalidInput
 from engine.io.result_reader import Result, ResultFrame, ResultSegment, as_result
+from engine.report import tempo_words
 
 
 def misfit_bones(frames: Sequence[ResultFrame], height: float) -> list[str]:
@@ -104,7 +105,9 @@ def segment_names(ref: Reference, n: int) -> list[str]:
 
 
 def page_summary(analysis: Analysis, result: Result) -> dict[str, Any]:
-    """Segments with names, tempo, score and worst bones, plus what the page header shows."""
+    """Segments with names, tempo, score and worst bones, plus what the page header shows,
+    in a coach's words: bones by their labels (``bone_labels``, in the result's bone order),
+    tempo as one sentence. The API's ``/segments`` keeps the data contract's bone keys."""
     segments = segments_or_error(result)
     names = segment_names(analysis.reference, len(segments))
     coach_named = bool((analysis.reference.domain_config or {}).get("segment_names"))
@@ -112,15 +115,20 @@ def page_summary(analysis: Analysis, result: Result) -> dict[str, Any]:
     for s, raw, name in zip(segments, result.segments, names, strict=True):
         d = s.model_dump()
         d["name"] = name if coach_named else (raw.name or name)
+        d["tempo_text"] = tempo_words(s.tempo_ratio)
         # (bone, mean error, width of its range over the candidates the video cannot tell
         # apart, or None for results that predate it)
         worst = sorted(s.bone_mean_errors_deg.items(), key=lambda kv: -kv[1])[:3]
-        d["worst_bones"] = [(b, e, s.bone_uncertainty_deg.get(b)) for b, e in worst]
+        d["worst_bones"] = [(bone_label(b), e, s.bone_uncertainty_deg.get(b)) for b, e in worst]
+        d["worst_bone"] = bone_label(s.worst_bone) if s.worst_bone else None
+        d["misfit_bones"] = [bone_label(b) for b in s.misfit_bones]
+        d["outside_bones"] = [bone_label(b) for b in s.outside_bones]
         d["score"] = s.mean_error_deg if raw.score_deg is None else raw.score_deg
         out.append(d)
     return {
         "analysis_id": analysis.id,
         "reference": analysis.reference.name,
         "performer": analysis.performer.display_name,
+        "bone_labels": list(BONE_LABELS),
         "segments": out,
     }

@@ -12,14 +12,15 @@ from __future__ import annotations
 import numpy as np
 
 from engine.body.skeleton import (
+    BEND_LABELS,
     BONE_CHILD,
     BONE_NAMES,
     BONE_PARENT,
-    JOINTS,
     LIMIT_A,
     LIMIT_B,
     LIMIT_JOINT,
     LIMIT_MIN_RAD,
+    column_name,
 )
 from engine.errors import InvalidInput
 
@@ -98,10 +99,12 @@ def within_limits(joints: np.ndarray, *, margin_rad: float = 0.0) -> np.ndarray:
     return ~np.any(limit_violations(joints, margin_rad=margin_rad), axis=-1)
 
 
-#: CSV columns of the angle between each pair of consecutive bones: (name, parent bone, bone).
-#: Every joint angle, not only the limited ones (the export's and the capture's CSV).
+#: CSV columns of the angle between each pair of consecutive bones: (name, parent bone, bone),
+#: named by the bend a coach sees (``angle_deg_left_knee``; the upper chest's three angles get
+#: three names). Every joint angle, not only the limited ones (the export's and the capture's
+#: CSV).
 JOINT_ANGLES: tuple[tuple[str, int, int], ...] = tuple(
-    (f"angle_{JOINTS[int(BONE_PARENT[b])]}_deg:{BONE_NAMES[pb]}|{BONE_NAMES[b]}", pb, b)
+    (f"angle_deg_{column_name(str(BEND_LABELS[b]))}", pb, b)
     for b in range(len(BONE_NAMES))
     for pb in range(len(BONE_NAMES))
     if int(BONE_CHILD[pb]) == int(BONE_PARENT[b])

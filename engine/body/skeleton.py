@@ -34,6 +34,20 @@ BONES: tuple[tuple[str, str], ...] = tuple(
     (JOINTS[p], JOINTS[c]) for p, c in zip(BONE_PARENT, BONE_CHILD, strict=True)
 )
 BONE_NAMES: tuple[str, ...] = tuple(f"{p}->{c}" for p, c in BONES)
+#: What a coach calls each bone, in BONE_NAMES order: the words every page, report and export
+#: shows (the identifiers above stay the data contract's keys).
+BONE_LABELS: tuple[str, ...] = (
+    "left pelvis", "left thigh", "left shin", "right pelvis", "right thigh", "right shin",
+    "lower spine", "upper spine", "left collarbone", "left upper arm", "left forearm",
+    "right collarbone", "right upper arm", "right forearm", "neck", "head",
+)  # fmt: skip
+#: What a coach calls the angle between each bone and the bone before it (the bend at its
+#: parent joint), in BONE_NAMES order; None for the three bones that leave the root.
+BEND_LABELS: tuple[str | None, ...] = (
+    None, "left hip", "left knee", None, "right hip", "right knee", None, "lower back",
+    "left shoulder girdle", "left shoulder", "left elbow", "right shoulder girdle",
+    "right shoulder", "right elbow", "upper back", "neck",
+)  # fmt: skip
 
 #: The 12 rigid parts (thesis 2.1.1 item 1): all bones leaving one joint form one part.
 PARTS: tuple[str, ...] = (
@@ -76,3 +90,17 @@ LIMIT_JOINT = _ro(np.array([JOINT_INDEX[j] for j, _, _, _ in JOINT_LIMITS]))
 LIMIT_A = _ro(np.array([JOINT_INDEX[a] for _, a, _, _ in JOINT_LIMITS]))
 LIMIT_B = _ro(np.array([JOINT_INDEX[b] for _, _, b, _ in JOINT_LIMITS]))
 LIMIT_MIN_RAD = _ro(np.radians([m for _, _, _, m in JOINT_LIMITS]))
+
+
+def bone_label(name: str) -> str:
+    """The coach's word for a bone given as ``"parent->child"`` or by its child joint (as
+    domain files may), or ``name`` itself when it is neither."""
+    if name in BONE_NAMES:
+        return BONE_LABELS[BONE_NAMES.index(name)]
+    j = JOINT_INDEX.get(name, 0)
+    return BONE_LABELS[j - 1] if j > 0 else name
+
+
+def column_name(label: str) -> str:
+    """A label as a CSV column word: ``"left upper arm"`` -> ``"left_upper_arm"``."""
+    return label.replace(" ", "_")

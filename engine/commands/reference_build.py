@@ -78,7 +78,7 @@ def write_model(model, out: Path, *, sport: str = "", sd_floor_deg: float = SD_F
 
 def describe(model) -> list[str]:
     """Lines of the build report."""
-    from engine.body.skeleton import BONE_NAMES
+    from engine.body.skeleton import BONE_LABELS
 
     s = model.summary()
     out = [
@@ -98,5 +98,5 @@ def describe(model) -> list[str]:
     sd = np.degrees(model.bone_sd)
     out.append("spread of the expert's bones (deg, mean and max over frames):")
     for b in np.argsort(-sd.mean(0)):
-        out.append(f"  {BONE_NAMES[b]:>26} {sd[:, b].mean():5.1f} {sd[:, b].max():6.1f}")
+        out.append(f"  {BONE_LABELS[b]:>22} {sd[:, b].mean():5.1f} {sd[:, b].max():6.1f}")
     return out

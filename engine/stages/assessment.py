@@ -284,8 +284,8 @@ def flag_image_misfit(
     )
     n, total = int(bad.sum()), len(bad)
     message = (
-        f"The video matches the reported posture poorly in {n} of {total} frames (flag "
-        "image_misfit, shaded on the error plot): the errors shown there may be "
-        "underestimated, so look at those frames yourself."
+        f"The video matches the reported posture poorly in {n} of {total} frames (shaded "
+        "on the error plot): the errors shown there may be underestimated, so look at those "
+        "frames yourself."
     )
     return dataclasses.replace(selection, flags=flags, messages=(*selection.messages, message))

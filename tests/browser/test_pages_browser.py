@@ -116,6 +116,10 @@ def test_results_overlay_plot_and_cursor_follow_the_video(
     page = ctx.new_page()
     sign_in(page, server.url, "pat@example.com", next_path=f"/analyses/{aid}")
     wait_results(page)
+    # a coach's words only: no bone identifiers, flags or symbols of the data contract
+    words = page.locator("main").inner_text()
+    assert not re.search(r"->|image_misfit|eps=|t'=|_deg", words), words
+    assert "Tempo: " in words
     go_to_frame(page, most_colourful_frame(clip_result))
     red, green = canvas_colours(page, "#overlay")
     page.locator("#stage-box").screenshot(path=str(shots / "overlay.png"))
@@ -159,7 +163,7 @@ def test_results_overlay_plot_and_cursor_follow_the_video(
     page.locator(".seg-card", has=page.locator(".seg-misfit")).first.click()
     page.wait_for_function("() => document.getElementById('analysis').dataset.frame === '3'")
     counts = [int(t.split("disagrees in ")[1].split()[0]) for t in warned.all_inner_texts()]
-    assert "mostly at r_knee->r_ankle:" in " ".join(warned.all_inner_texts())
+    assert "mostly at right shin:" in " ".join(warned.all_inner_texts())
     assert sum(counts) >= 3, counts  # a boundary frame belongs to both of its segments
     page.wait_for_selector("#viewer3d:not([hidden]), #fallback3d:not([hidden])", timeout=30_000)
     page.wait_for_timeout(1500)  # let the 3D view draw
@@ -298,7 +302,7 @@ def test_coach_dashboard_and_references(server, browser, clip, clip_result, shot
     # the detected segments of the upload (64_29: three) are counted for the coach
     card.get_by_label("Segment names (3 segments, one a line").fill("address\nbackswing\ndownswing")
     card.get_by_text("Per-bone weights and tolerances").click()
-    card.get_by_label("l_knee->l_ankle tolerance in degrees").fill("15")
+    card.get_by_label("left shin tolerance in degrees").fill("15")
     card.get_by_role("button", name="Save").click()
     card.get_by_text("Saved.").wait_for()
     page.wait_for_function("() => Array.from(document.images).every(i => i.complete)")

@@ -56,7 +56,7 @@ def test_the_analysis_page_shows_the_experts_range(server, browser, clip, clip_r
     assert page.locator("#plot-svg polygon.expert-band").count() == 1
     assert "expert's own variation" in page.locator("#plot-svg").inner_html()
     cards = page.locator(".seg-card")
-    assert "outside the expert's range at r_shoulder->r_elbow" in cards.first.inner_text()
+    assert "outside the expert's range at right upper arm" in cards.first.inner_text()
     if cards.count() > 1:
         assert "within the expert's range" in cards.nth(1).inner_text()
     page.screenshot(path=str(shots / "analysis-expert-range.png"), full_page=True)

@@ -187,7 +187,12 @@ def test_results_summary_video_and_exports(env):
     sign_in(client, "p@a.org")
     summary = client.get(f"/api/v1/analyses/{aid}/summary").json()
     assert [s["name"] for s in summary["segments"]] == ["segment 1", "segment 2"]
-    assert summary["segments"][1]["worst_bones"][0][0] == BONE_NAMES[15]
+    # in a coach's words: the bone's label, the tempo as one sentence
+    assert summary["segments"][1]["worst_bones"][0][0] == "head"
+    assert summary["bone_labels"][9] == "left upper arm" and BONE_NAMES[9] == "l_shoulder->l_elbow"
+    assert all("->" not in b for s in summary["segments"] for b in s["misfit_bones"])
+    assert summary["segments"][0]["tempo_text"].endswith("than the expert") or summary[
+        "segments"][0]["tempo_text"] == "the expert's tempo"  # fmt: skip
     r = client.get(f"/api/v1/analyses/{aid}/video.mp4")
     assert r.status_code == 200 and r.headers["content-type"] == "video/mp4"
     import av
@@ -197,7 +202,10 @@ def test_results_summary_video_and_exports(env):
     rows = list(csv.reader(io.StringIO(client.get(f"/api/v1/analyses/{aid}/export.csv").text)))
     assert rows[0][:5] == ["t", "time_s", "reference_frame", "selected", "posture_error_deg"]
     assert len(rows) == 1 + 8 and len(rows[1]) == len(rows[0])
-    assert float(rows[2][rows[0].index(f"error_deg:{BONE_NAMES[0]}")]) == pytest.approx(15.0)
+    assert len(set(rows[0])) == len(rows[0])  # every column named once
+    assert float(rows[2][rows[0].index("error_deg_left_pelvis")]) == pytest.approx(15.0)
+    assert {"range_deg_left_upper_arm", "angle_deg_right_knee", "angle_deg_upper_back"} <= set(
+        rows[0])  # fmt: skip
     bvh = client.get(f"/api/v1/analyses/{aid}/export.bvh")
     assert bvh.status_code == 200 and bvh.text.startswith("HIERARCHY")
     assert "attachment" in bvh.headers["content-disposition"]
@@ -256,7 +264,7 @@ def test_joint_angles_of_a_right_angle():
     j[0, JOINTS.index("l_knee")] = [0, -1, 0]
     j[0, JOINTS.index("l_ankle")] = [1, -1, 0]
     names = [a[0] for a in media.JOINT_ANGLES]
-    k = next(i for i, n in enumerate(names) if n.startswith("angle_l_knee_deg"))
+    k = next(i for i, n in enumerate(names) if n == "angle_deg_left_knee")
     assert media.joint_angles_deg(j)[0, k] == pytest.approx(90.0)
 
 
@@ -287,3 +295,25 @@ def test_report_stills_show_a_segment_where_the_video_disagrees():
     first = media.still_frames(result, n=2)
     result["frames"][1]["flags"] = ["image_misfit"]
     assert 1 not in first and 1 in media.still_frames(result, n=2)
+
+
+@pytest.mark.parametrize(
+    ("ratio", "words"),
+    [(1.0, "the expert's tempo"), (1.004, "the expert's tempo"),
+     (1.12, "12 % slower than the expert"), (0.97, "3 % faster than the expert"),
+     (None, "tempo unknown"), (0.0, "tempo unknown"), (float("nan"), "tempo unknown")],
+)  # fmt: skip
+def test_tempo_is_said_one_way(ratio, words):
+    from engine.report import tempo_words
+
+    assert tempo_words(ratio) == words
+
+
+def test_every_bone_and_bend_has_a_coach_word():
+    from engine.body.skeleton import BEND_LABELS, BONE_LABELS, BONE_PARENT, bone_label
+
+    assert len(set(BONE_LABELS)) == len(BONE_LABELS) == len(BONE_NAMES)
+    # a bend for every bone that has a bone before it, none for those leaving the root
+    assert [b is None for b in BEND_LABELS] == [int(p) == 0 for p in BONE_PARENT]
+    assert bone_label("l_elbow") == "left upper arm" == bone_label("l_shoulder->l_elbow")
+    assert bone_label("tail") == "tail"

@@ -21,12 +21,15 @@ from app.api.params import DbId
 from app.api.routes.comments import comment_rows
 from app.core import invites, media, sessions
 from app.core.reflect import reflect
-from app.core.summary import segment_names, summarise_segments
+from app.core.summary import page_summary
 from app.models import ANALYSIS_STATES, User
+from engine.body.skeleton import BONE_LABELS, BONE_NAMES
 from engine.report import ONE_CAMERA_NOTE
 
 TEMPLATES = Jinja2Templates(directory=Path(__file__).resolve().parents[1] / "templates")
 TEMPLATES.env.globals["one_camera_note"] = ONE_CAMERA_NOTE
+# One table of bone words for every page's script (common.js: coach.boneLabel).
+TEMPLATES.env.globals["bone_words"] = {"ids": list(BONE_NAMES), "labels": list(BONE_LABELS)}
 router = APIRouter(include_in_schema=False)
 
 
@@ -205,14 +208,13 @@ def report_page(request: Request, analysis_id: str, session: SessionDep, notifie
     except ApiError as exc:
         return _render(request, "message.html", user, exc.status_code, title="No report",
                        message=exc.message)  # fmt: skip
-    segments = summarise_segments(result)
-    names = segment_names(a.reference, len(segments))
+    segments = page_summary(a, result)["segments"]
     frames = result.frames
     comments = comment_rows(session, a)
     stills = media.report_stills(a.video_path, a.work_dir, result)  # sync route: a threadpool
     return _render(
         request, "report.html", user, analysis=a, result=result.doc, frames=frames,
-        segments=list(zip(segments, names, strict=True)), comments=comments,
+        segments=segments, comments=comments,
         plot=media.error_plot_svg(result), fps=result.video.fps, stills=stills,
         mean_error=(sum(f.posture_error_deg for f in frames) / len(frames)) if frames else 0.0,
     )  # fmt: skip
@@ -296,6 +298,4 @@ def references_page(request: Request, session: SessionDep):
         return _sign_in(request)
     if user.role != "coach":
         return _forbidden(request, user, "Only coaches manage references.")
-    from engine.body.skeleton import BONE_NAMES
-
     return _render(request, "references.html", user, bones=BONE_NAMES)

@@ -9,10 +9,8 @@
   const base = "/api/v1/analyses/" + id;
   const $ = function (s) { return document.getElementById(s); };
   const SVGNS = "http://www.w3.org/2000/svg";
-  const BONES = ["hip->l_hip", "l_hip->l_knee", "l_knee->l_ankle", "hip->r_hip", "r_hip->r_knee",
-    "r_knee->r_ankle", "hip->lower_chest", "lower_chest->upper_chest", "upper_chest->l_shoulder",
-    "l_shoulder->l_elbow", "l_elbow->l_wrist", "upper_chest->r_shoulder", "r_shoulder->r_elbow",
-    "r_elbow->r_wrist", "upper_chest->neck", "neck->head_top"];
+  // The bones in the result's order, in a coach's words (one table, served with the page).
+  const BONES = coach.BONE_IDS.map(function (_, b) { return coach.boneLabel(b); });
   const PARENT = [0, 1, 2, 0, 4, 5, 0, 7, 8, 9, 10, 8, 12, 13, 8, 15];
   const CHILD = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16];
   const PALETTE = ["#1971c2", "#9c36b5", "#e67700", "#0c8599", "#5f3dc4", "#d6336c", "#2f9e44", "#495057"];
@@ -375,11 +373,6 @@
   });
 
   // ---------------------------------------------------------------- segments
-  function tempoText(r) {
-    if (!r) return "tempo: –";
-    if (Math.abs(r - 1) < 0.05) return "tempo: as the expert";
-    return "tempo: " + r.toFixed(2) + "× the expert's time (" + (r > 1 ? "slower" : "faster") + ")";
-  }
   // How sure a bone's error is: half the width of its range over the candidates the video
   // cannot tell apart (a bend in depth one camera cannot measure gets a wide range).
   function spread(width) {
@@ -406,7 +399,7 @@
         coach.el("h3", { text: s.name }),
         coach.el("span", { class: "score", text: deg(s.score != null ? s.score : s.mean_error_deg) }),
         coach.el("span", { class: "muted", text: "frames " + s.performer_start + "–" + s.performer_end }),
-        coach.el("span", { text: tempoText(s.tempo_ratio) }),
+        coach.el("span", { text: "Tempo: " + s.tempo_text }),
         rangeText(s),  // null (skipped) for a reference from one take
         coach.el("ul", {}, s.worst_bones.map(function (wb) { return coach.el("li", { text: wb[0] + ": " + deg(wb[1]) + spread(wb[2]) }); })),
         warn,  // null (skipped) where the video agrees
@@ -428,7 +421,7 @@
           coach.el("th", { scope: "row", text: s.name }),
           coach.el("td", { text: s.performer_start + "–" + s.performer_end }),
           coach.el("td", { text: s.reference_start + "–" + s.reference_end }),
-          coach.el("td", { text: s.tempo_ratio ? s.tempo_ratio.toFixed(2) + "×" : "–" }),
+          coach.el("td", { text: s.tempo_text }),
           coach.el("td", { text: s.mean_error_deg.toFixed(1) + "°" }),
           coach.el("td", { text: s.worst_bones.map(function (wb) { return wb[0] + " " + deg(wb[1]); }).join(", ") }),
           coach.el("td", { text: s.misfit_frames ? s.misfit_frames + " frames" + ((s.misfit_bones || []).length ? " (" + s.misfit_bones.join(", ") + ")" : "") : "–" }),

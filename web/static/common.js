@@ -37,10 +37,19 @@ window.coach = (function () {
     (children || []).forEach(function (c) { if (c) e.append(c); });
     return e;
   }
+  // The coach's word for each bone (engine.body.skeleton.BONE_LABELS, one table for every
+  // page): by index in the result's bone order, or by "parent->child" / child-joint id.
+  const words = JSON.parse(document.body.dataset.boneWords || '{"ids": [], "labels": []}');
+  function boneLabel(id) {
+    if (typeof id === "number") return words.labels[id];
+    let i = words.ids.indexOf(id);
+    if (i < 0) i = words.ids.findIndex(function (b) { return b.split("->")[1] === id; });
+    return i >= 0 ? words.labels[i] : id;
+  }
   const out = document.getElementById("sign-out");
   if (out) out.addEventListener("click", async function () {
     await fetch("/api/v1/session", { method: "DELETE", credentials: "same-origin" });
     location.href = "/login";
   });
-  return { api: api, errorColor: errorColor, el: el, RED_AT: RED_AT };
+  return { api: api, errorColor: errorColor, el: el, RED_AT: RED_AT, boneLabel: boneLabel, BONE_IDS: words.ids };
 })();

@@ -105,14 +105,13 @@
     const tb = document.querySelector("#cmp-table tbody");
     tb.textContent = "";
     d.segments.forEach(function (s) {
-      const ta = s.a && s.a.tempo_ratio, tbv = s.b && s.b.tempo_ratio;
       tb.append(coach.el("tr", { "data-change": s.error_change || "" }, [
         coach.el("th", { scope: "row", text: s.name }),
         coach.el("td", { text: s.a ? fmt(s.a.mean_error_deg) + "°" : "–" }),
         coach.el("td", { text: s.b ? fmt(s.b.mean_error_deg) + "°" : "–" }),
         coach.el("td", {}, [badge(s.error_change, signed(s.error_change_deg))]),
-        coach.el("td", { text: ta == null ? "–" : ta.toFixed(2) + "×" }),
-        coach.el("td", { text: tbv == null ? "–" : tbv.toFixed(2) + "×" }),
+        coach.el("td", { text: s.a ? s.a.tempo_text : "–" }),
+        coach.el("td", { text: s.b ? s.b.tempo_text : "–" }),
         coach.el("td", {}, [badge(s.tempo_change)]),
       ]));
     });

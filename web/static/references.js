@@ -47,7 +47,7 @@
     const t = (r.derived || {}).takes;
     if (!t) return null;
     const rows = Object.keys(t.bone_sd_deg_mean).sort(function (a, b) { return t.bone_sd_deg_mean[b] - t.bone_sd_deg_mean[a]; })
-      .map(function (b) { return coach.el("tr", {}, [coach.el("td", { text: b }), coach.el("td", { text: t.bone_sd_deg_mean[b].toFixed(1) + "°" }), coach.el("td", { text: t.bone_sd_deg_max[b].toFixed(1) + "°" })]); });
+      .map(function (b) { return coach.el("tr", {}, [coach.el("td", { text: coach.boneLabel(b) }), coach.el("td", { text: t.bone_sd_deg_mean[b].toFixed(1) + "°" }), coach.el("td", { text: t.bone_sd_deg_max[b].toFixed(1) + "°" })]); });
     return coach.el("div", { class: "takes" }, [
       coach.el("p", { text: "Built from " + t.kept.length + " takes (" + t.kept.join(", ") + "); time pattern: the median take " + t.median_take + "." }),
       t.warnings.length ? coach.el("ul", { class: "error" }, t.warnings.map(function (w) { return coach.el("li", { text: w }); })) : null,
@@ -68,9 +68,10 @@
     const grid = coach.el("div", { class: "weights", role: "group", "aria-label": "Per-bone weight and tolerance" }, [
       coach.el("span", { class: "head", text: "Bone" }), coach.el("span", { class: "head", text: "Weight" }), coach.el("span", { class: "head", text: "Tolerance °" })]);
     BONES.forEach(function (bone, b) {
-      const w = coach.el("input", { type: "number", min: 0, max: 100, step: 0.5, value: boneValue(dom.bone_weights, b, 1), id: id + "-w" + b, "aria-label": bone + " weight", "data-bone": bone, class: "w" });
-      const t = coach.el("input", { type: "number", min: 0, max: 180, step: 1, value: boneValue(dom.tolerances_deg, b, ""), placeholder: "default", id: id + "-t" + b, "aria-label": bone + " tolerance in degrees", "data-bone": bone, class: "t" });
-      grid.append(coach.el("label", { for: id + "-w" + b, text: bone }), w, t);
+      const label = coach.boneLabel(bone);
+      const w = coach.el("input", { type: "number", min: 0, max: 100, step: 0.5, value: boneValue(dom.bone_weights, b, 1), id: id + "-w" + b, "aria-label": label + " weight", "data-bone": bone, class: "w" });
+      const t = coach.el("input", { type: "number", min: 0, max: 180, step: 1, value: boneValue(dom.tolerances_deg, b, ""), placeholder: "default", id: id + "-t" + b, "aria-label": label + " tolerance in degrees", "data-bone": bone, class: "t" });
+      grid.append(coach.el("label", { for: id + "-w" + b, text: label }), w, t);
     });
     const status = coach.el("p", { class: "saved", role: "status" });
     const f = coach.el("form", { class: "stack", "aria-label": "Edit " + r.name }, [

@@ -185,9 +185,12 @@ class PartialScene:
                     h["best"].visible = False
                 h["reference"].points = _segments_of(ref).astype(np.float32)
                 if st.phase == "reference":
-                    text = f"analysing: expert aligned (stage 2)  t'={i}"
+                    text = f"Analysing. Frame {i}: the expert at the matched moment"
                 else:
-                    text = f"analysing: candidates {st.frames_done}/{st.n_frames} frames  t'={i}"
+                    text = (
+                        f"Analysing. Frame {i}: postures found for {st.frames_done} of "
+                        f"{st.n_frames} frames"
+                    )
                 h["label"].text = text
                 h["label"].position = tuple(float(x) for x in ref[16] + LABEL_LIFT)
 

@@ -141,8 +141,10 @@ class ViewerScene:
             else:  # the video agrees with the reported posture: nothing to show
                 pts = _hidden_at(sel[0])
             h["image_best"].points = pts.astype(np.float32)
-            label = f"t'={f.t}  t={f.reference_frame}  eps={f.posture_error_deg:.1f} deg"
-            h["label"].text = label
+            h["label"].text = (
+                f"frame {f.t}: {f.posture_error_deg:.1f}° from the expert's frame "
+                f"{f.reference_frame}"
+            )
             top = sel[16] + LABEL_LIFT  # above the performer's head, or the expert's if higher
             top[1] = max(sel[16, 1], ref[16, 1]) + LABEL_LIFT[1]
             h["label"].position = tuple(float(x) for x in top)
