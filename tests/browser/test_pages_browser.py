@@ -80,6 +80,8 @@ def test_upload_through_the_page_runs_to_results(server, browser, clip, shots):
     page.set_input_files("#video", str(clip))
     page.screenshot(path=str(shots / "upload.png"), full_page=True)
     page.get_by_role("button", name="Upload and analyse").click()
+    live = []  # the live 3D view's answers: asked for once stage 2 is done, not every second
+    page.on("response", lambda r: live.append(r.status) if r.url.endswith("/viewer/live") else 0)
     page.wait_for_url("**/analyses/*", timeout=30_000)
     page.wait_for_function("() => document.getElementById('stage-bar').value > 0", timeout=60_000)
     page.screenshot(path=str(shots / "progress.png"), full_page=True)
@@ -89,6 +91,7 @@ def test_upload_through_the_page_runs_to_results(server, browser, clip, shots):
     except PlaywrightTimeout as e:
         raise AssertionError(analysis_diagnosis(page, server)) from e
     assert page.locator("#progress-view").is_hidden()
+    assert live.count(409) <= 1, live
     # stage names came over the stream, said in the performer's words
     stages = page.locator("#stage-list li").all_inner_texts()
     assert stages and all(len(s.split()) >= 2 for s in stages), stages
@@ -310,6 +313,19 @@ def test_coach_dashboard_and_references(server, browser, clip, clip_result, shot
     page.reload()
     page.wait_for_selector(".ref-card")
     assert "backswing" in page.locator(".ref-card").first.locator("textarea").input_value()
+    # Delete, after a confirmation: the demo reference has analyses and stays, with the reason
+    demo = page.locator(".ref-card", has_text="CMU 64_29 (golf swing)")
+    page.once("dialog", lambda d: d.accept())
+    demo.get_by_role("button", name="Delete reference").click()
+    assert "delete them first" in demo.get_by_role("alert").inner_text()
+    second = page.locator(".ref-card", has_text="Second swing")
+    page.once("dialog", lambda d: d.dismiss())  # changing one's mind keeps it
+    second.get_by_role("button", name="Delete reference").click()
+    assert page.locator(".ref-card").count() == 2
+    page.once("dialog", lambda d: d.accept())
+    second.get_by_role("button", name="Delete reference").click()
+    page.wait_for_function("() => document.querySelectorAll('.ref-card').length === 1")
+    assert page.locator("#ref-done").inner_text() == "Deleted “Second swing”."
     ctx.close()
 
 

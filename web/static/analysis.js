@@ -50,7 +50,10 @@
     });
     if (a.error) { $("analysis-error").textContent = a.error; $("analysis-error").hidden = false; }
     $("cancel").hidden = !(a.status === "queued" || a.status === "running");
+    // The live 3D view exists once stage 2 has aligned the expert: ask for it only then.
+    if (a.status === "running" && LIVE_STAGES.indexOf(a.stage) >= 0) followLive();
   }
+  const LIVE_STAGES = ["candidates", "select", "selection"];
   // While it runs, the 3D view fills in: the aligned expert after stage 2, the best candidate
   // of each frame as stage 3 finishes it, colours when stage 4 is done (web/viewer/partial.py).
   const LIVE_TEXT = {
@@ -73,7 +76,7 @@
         fig.dataset.framesDone = String(v.frames_done);
         $("live3d-status").textContent = (LIVE_TEXT[v.phase] || "").replace("{done}", v.frames_done).replace("{n}", v.frames);
       } catch (e) {
-        if (e.status !== 409) { stopLive(); }  // 409: stage 2 is not done yet, ask again
+        if (e.status !== 409) { stopLive(); }  // 409: stage 2's files are not written yet
       } finally { liveBusy = false; }
     }
     liveTimer = setInterval(step, 1000);
@@ -533,5 +536,5 @@
 
   // ---------------------------------------------------------------- start
   if (root.dataset.status === "done") loadResults();
-  else if (root.dataset.status === "queued" || root.dataset.status === "running") { follow(); followLive(); }
+  else if (root.dataset.status === "queued" || root.dataset.status === "running") follow();
 })();

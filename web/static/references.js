@@ -95,12 +95,28 @@
         status.className = "saved"; status.textContent = "Saved.";
       } catch (e) { status.className = "error"; status.textContent = e.message; }
     });
+    // Delete, after the coach confirms; a reference analyses use stays (the API says which).
+    const gone = coach.el("p", { class: "error", role: "alert", hidden: "" });
+    const del = coach.el("button", { type: "button", class: "danger", text: "Delete reference" });
+    del.addEventListener("click", async function () {
+      if (!confirm("Delete the reference " + r.name + "? Analyses can no longer use it. This cannot be undone.")) return;
+      gone.hidden = true;
+      try {
+        await coach.api("/api/v1/references/" + r.id, { method: "DELETE" });
+        await load();
+        done.textContent = "Deleted “" + r.name + "”."; done.hidden = false;
+      } catch (e) {
+        gone.textContent = e.status === 409 ? "Analyses use this reference: delete them first, then the reference." : e.message;
+        gone.hidden = false;
+      }
+    });
     return coach.el("section", { class: "card ref-card", "aria-labelledby": id + "-h" }, [
       coach.el("h2", { id: id + "-h", text: r.name }),
       coach.el("p", { class: "muted", text: (r.frames || "?") + " frames at " + (r.fps ? r.fps.toFixed(1) : "?") + " fps · " + (r.duration_s ? r.duration_s.toFixed(1) + " s" : "") }),
       coach.el("img", { src: r.strip, alt: "Postures of " + r.name + " at its segment boundaries" }),
       takesInfo(r),  // null (skipped) for a reference from one BVH
       f,
+      coach.el("div", { class: "ref-delete" }, [del, gone]),
     ]);
   }
 
