@@ -169,3 +169,33 @@ def test_upload_errors_are_shown_next_to_the_file_input(server, browser, shots, 
     assert page.locator("#video").get_attribute("aria-invalid") == "true"
     page.locator("fieldset").last.screenshot(path=str(shots / "upload-error.png"))
     ctx.close()
+
+
+def test_the_upload_page_checks_the_first_frame_before_uploading(server, browser, clip, shots,
+                                                                  tmp_path):  # fmt: skip
+    """The filming guide is on the page; choosing a video checks its first frame at once: the
+    test clip (whole body) passes, a real squat clip with the legs cut off is told why."""
+    from engine.io.encode import write_video
+    from engine.io.video import read_video
+    from tests.engine.stages.test_framing import SQUAT
+
+    v = read_video(SQUAT, height=0, max_frames=6)
+    cut = tmp_path / "cut.mp4"
+    write_video(cut, np.ascontiguousarray(v.frames[:, : int(0.6 * v.frames.shape[1]) // 2 * 2]),
+                v.fps)  # fmt: skip
+    ctx = browser.new_context(viewport={"width": 1000, "height": 1100})
+    page = ctx.new_page()
+    sign_in(page, server.url, "pat@example.com", next_path="/upload")
+    guide = page.locator(".filming-guide")
+    assert "Start in the expert's first posture" in guide.inner_text()
+    page.wait_for_function("() => document.querySelector('.filming-guide img').naturalWidth > 0")
+    check = page.locator("#framing-check")
+    page.set_input_files("#video", str(clip))
+    page.wait_for_selector("#framing-check[data-state=ok], #framing-check[data-state=problems]")
+    assert check.get_attribute("data-state") == "ok", check.inner_text()
+    page.set_input_files("#video", str(cut))
+    page.wait_for_selector("#framing-check[data-state=problems]", timeout=20_000)
+    assert "out of the picture" in check.inner_text()
+    assert page.get_by_role("button", name="Upload and analyse").is_enabled()  # a warning only
+    page.locator("main").screenshot(path=str(shots / "upload-framing-check.png"))
+    ctx.close()

@@ -117,6 +117,56 @@
       return;
     }
     file = f;
+    checkFraming(f);
+  }
+
+  // The filming check: the chosen video's first frame goes to the API as a picture before
+  // anything is uploaded; what to change shows at once. A warning, never a block. Videos
+  // this browser cannot decode (e.g. HEVC in some browsers) are simply not checked here.
+  const check = document.getElementById("framing-check");
+  let checking = 0;
+  function firstFrame(f) {
+    return new Promise(function (resolve, reject) {
+      const v = document.createElement("video");
+      const url = URL.createObjectURL(f);
+      const done = function (fn, x) { URL.revokeObjectURL(url); v.removeAttribute("src"); fn(x); };
+      v.muted = true; v.preload = "auto"; v.playsInline = true;
+      v.addEventListener("error", function () { done(reject, new Error("undecodable")); });
+      v.addEventListener("loadeddata", function () { v.currentTime = Math.min(0.05, (v.duration || 1) / 2); });
+      v.addEventListener("seeked", function () {
+        const c = document.createElement("canvas");
+        const k = Math.min(1, 960 / Math.max(v.videoWidth, v.videoHeight));
+        c.width = Math.round(v.videoWidth * k); c.height = Math.round(v.videoHeight * k);
+        c.getContext("2d").drawImage(v, 0, 0, c.width, c.height);
+        c.toBlob(function (b) { done(b ? resolve : reject, b || new Error("no picture")); }, "image/jpeg", 0.9);
+      }, { once: true });
+      v.src = url;
+    });
+  }
+  async function checkFraming(f) {
+    const mine = ++checking;
+    check.hidden = false; check.className = "framing checking";
+    check.dataset.state = "checking";
+    check.textContent = "Checking how the video is filmed…";
+    try {
+      const data = new FormData();
+      data.append("frame", await firstFrame(f), "first-frame.jpg");
+      const r = await coach.api("/api/v1/framing", { method: "POST", body: data });
+      if (mine !== checking) return;  // another video was chosen meanwhile
+      check.textContent = "";
+      check.className = "framing " + (r.problems.length ? "warn" : "ok");
+      check.dataset.state = r.problems.length ? "problems" : "ok";
+      if (!r.problems.length) {
+        check.append(coach.el("p", { text: "✓ First frame checked: one person, the whole body in view." }));
+      } else {
+        check.append(coach.el("p", { text: "⚠ Before you upload, the first frame suggests:" }),
+          coach.el("ul", {}, r.problems.map(function (t) { return coach.el("li", { text: t }); })),
+          coach.el("p", { class: "muted", text: "You can still upload it; the analysis may then be less reliable." }));
+      }
+    } catch (e) {
+      if (mine !== checking) return;
+      check.hidden = true; check.dataset.state = "unchecked";
+    }
   }
   input.addEventListener("change", function () { choose(input.files[0]); });
   ["dragenter", "dragover"].forEach(function (t) {

@@ -7,6 +7,7 @@ from app.api.routes import (
     captures,
     club,
     comments,
+    framing,
     health,
     invites,
     keys,
@@ -29,6 +30,7 @@ api_router.include_router(analyses.router)
 api_router.include_router(repetitions.router)
 api_router.include_router(reviews.router)
 api_router.include_router(captures.router)
+api_router.include_router(framing.router)
 api_router.include_router(comments.router)
 api_router.include_router(invites.router)
 api_router.include_router(session.router)
