@@ -45,6 +45,7 @@ from worker.contract import (
     BrokerTasks,
     CaptureJob,
 )
+from worker.result_backend import celery_url
 from worker.settings import WorkerSettings
 
 log = logging.getLogger("coach.worker")
@@ -63,7 +64,7 @@ def configure(settings: WorkerSettings | None = None) -> WorkerSettings:
     settings = settings or WorkerSettings.from_env()
     conf: dict = dict(
         broker_url=settings.broker_url,
-        result_backend=settings.result_backend,
+        result_backend=celery_url(settings.result_backend),
         task_serializer="json",
         result_serializer="json",
         accept_content=["json"],

@@ -93,9 +93,14 @@ def _publisher(task):
     def publish(meta: dict) -> None:
         if task.request.id is None:  # called directly, not as a task
             return
-        task.update_state(state=PROGRESS_STATE, meta=meta)
-        if root_id and root_id != task.request.id:
-            task.update_state(task_id=root_id, state=PROGRESS_STATE, meta=meta)
+        # Progress is advice (status.json in the analysis folder is what users see): a
+        # result store that cannot take it must not fail the stage that reports it.
+        try:
+            task.update_state(state=PROGRESS_STATE, meta=meta)
+            if root_id and root_id != task.request.id:
+                task.update_state(task_id=root_id, state=PROGRESS_STATE, meta=meta)
+        except Exception as exc:
+            log.warning("progress.publish_failed task=%s error=%r", task.request.id, exc)
 
     return publish
 
