@@ -1,9 +1,10 @@
 """Per-analysis viser servers for the embedded 3D view, started on demand on free local ports.
 
-Each analysis gets its own :class:`viser.ViserServer` (so many viewers can look at different
-analyses at once); the page embeds it in an iframe and moves its frame through
-:meth:`LiveViewers.set_frame` as the video plays. Servers idle for ``idle_s`` seconds, or
-beyond ``max_servers``, are stopped (least recently used first).
+Each analysis gets its own :class:`viser.ViserServer` on a loopback port (so many viewers can
+look at different analyses at once); the page frames it through the app's own origin
+(:mod:`web.viewer.proxy`), and every browser tab gets its own view of the scene, moved through
+:meth:`LiveViewers.set_frame` as that tab's video plays. Servers idle for ``idle_s`` seconds,
+or beyond ``max_servers``, are stopped (least recently used first).
 
 While an analysis runs, :meth:`LiveViewers.ensure_running` starts its server with the partial
 scene of :mod:`web.viewer.partial` as soon as stage 2's output exists; a watcher thread polls
@@ -14,6 +15,7 @@ appear, and swaps in the finished, coloured scene on the same server once result
 
 from __future__ import annotations
 
+import asyncio
 import atexit
 import logging
 import threading
@@ -44,6 +46,14 @@ class _Live:
     state: Any = None
     lock: threading.RLock = field(default_factory=threading.RLock)
     stop: threading.Event = field(default_factory=threading.Event)
+    #: Viser client ids handed out so far (viser numbers connections 0, 1, ... in order).
+    connections: int = 0
+    #: Browser tab token -> its viser client id.
+    tabs: dict[str, int] = field(default_factory=dict)
+    #: Frames asked for by tabs whose websocket is not relayed yet.
+    tab_frames: dict[str, int] = field(default_factory=dict)
+    #: Held while a relay opens its upstream connection (see web.viewer.proxy).
+    connecting: asyncio.Lock = field(default_factory=asyncio.Lock)
 
     @property
     def partial(self) -> bool:
@@ -130,13 +140,57 @@ class LiveViewers:
         n = len(live.scene.frames)
         return {"phase": "done", "frames_done": n, "frames": n}
 
-    def set_frame(self, analysis_id: str, frame: int) -> bool:
+    def port_of(self, analysis_id: str) -> int | None:
+        """The port of the analysis' running viewer, or None."""
+        live = self._live.get(analysis_id)
+        if live is None:
+            return None
+        live.last_used = time.monotonic()
+        return live.port
+
+    def connect_lock(self, analysis_id: str) -> asyncio.Lock:
+        """The lock a relay holds while it connects to the analysis' viewer."""
+        live = self._live.get(analysis_id)
+        return asyncio.Lock() if live is None else live.connecting
+
+    def next_client_id(self, analysis_id: str) -> int:
+        """The viser client id the next connection to the analysis' viewer gets (viser's
+        websocket server numbers connections 0, 1, 2, ... as they arrive; the relays connect
+        one at a time, under :meth:`connect_lock`)."""
+        live = self._live[analysis_id]
+        with live.lock:
+            live.connections += 1
+            return live.connections - 1
+
+    def bind_tab(self, analysis_id: str, tab: str, client_id: int) -> None:
+        """Tab ``tab`` is viser client ``client_id``: its frames go to that client's view."""
+        live = self._live.get(analysis_id)
+        if live is None:
+            return
+        with live.lock:
+            live.tabs[tab] = client_id
+            while len(live.tabs) > MAX_TABS:  # reloads leave dead tabs behind: oldest go
+                live.tabs.pop(next(iter(live.tabs)))
+            frame = live.tab_frames.pop(tab, None)
+        if frame is not None:
+            self.set_frame(analysis_id, frame, tab)
+
+    def set_frame(self, analysis_id: str, frame: int, tab: str) -> bool:
+        """Show ``frame`` in tab ``tab``'s own 3D view of the finished analysis."""
         live = self._live.get(analysis_id)
         if live is None or live.partial:
             return False
         live.last_used = time.monotonic()
         n = len(live.scene.frames)
-        live.scene.set_frame(min(max(int(frame), 0), n - 1))  # moves its slider too
+        i = min(max(int(frame), 0), n - 1)
+        with live.lock:
+            client_id = live.tabs.get(tab)
+            if client_id is None:  # its websocket is not relayed yet: shown when it is
+                live.tab_frames[tab] = i
+                while len(live.tab_frames) > MAX_TABS:
+                    live.tab_frames.pop(next(iter(live.tab_frames)))
+                return True
+        live.scene.set_frame(i, client_id)  # moves that tab's slider too
         return True
 
     def _start(self, load: Callable[[], tuple[Any, dict[str, Any]]]) -> _Live:
@@ -147,7 +201,7 @@ class LiveViewers:
         reference_joints, result = load()
         server, port = self._new_server()
         try:
-            scene = build_scene(server, reference_joints, result)
+            scene = build_scene(server, reference_joints, result, per_client=True)
             server.gui.main_panel.minimize()
             wait_until_listening(port)
         except Exception as exc:
@@ -189,7 +243,7 @@ class LiveViewers:
 
         live.stop.set()
         live.scene.remove()
-        live.scene = build_scene(live.server, reference_joints, result)
+        live.scene = build_scene(live.server, reference_joints, result, per_client=True)
         live.state = None
 
     def _watch(self, analysis_id: str, live: _Live, work_dir: Path) -> None:
@@ -242,6 +296,9 @@ class LiveViewers:
     def __len__(self) -> int:
         return len(self._live)
 
+
+#: Tabs remembered per viewer.
+MAX_TABS = 256
 
 _viewers: LiveViewers | None = None
 

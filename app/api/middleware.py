@@ -130,18 +130,14 @@ class CrossOriginGuard:
         return origin == f"{scheme}://{headers.get('host', '')}"
 
 
-def _csp(scope: Scope) -> bytes:
-    """Pages load only their own scripts and styles; the 3D view is a frame from the viser
-    server on another port of the same host (web.viewer)."""
-    host = Headers(scope=scope).get("host", "").rsplit(":", 1)[0] or "localhost"
-    if host.count(":") > 1 and not host.startswith("["):  # a bare IPv6 address
-        host = f"[{host}]"
-    return (
-        "default-src 'self'; script-src 'self'; style-src 'self'; "
-        "img-src 'self' data: blob:; media-src 'self' blob:; connect-src 'self'; "
-        f"frame-src 'self' http://{host}:* https://{host}:*; frame-ancestors 'self'; "
-        "object-src 'none'; base-uri 'self'; form-action 'self'"
-    ).encode()
+#: Pages load only their own scripts and styles; the 3D view is a frame of this origin too
+#: (web.viewer.proxy relays it).
+CSP = (
+    b"default-src 'self'; script-src 'self'; style-src 'self'; "
+    b"img-src 'self' data: blob:; media-src 'self' blob:; connect-src 'self'; "
+    b"frame-src 'self'; frame-ancestors 'self'; "
+    b"object-src 'none'; base-uri 'self'; form-action 'self'"
+)
 
 
 class SecurityHeadersMiddleware:
@@ -166,7 +162,7 @@ class SecurityHeadersMiddleware:
         if self.hsts:
             extra.append((b"strict-transport-security", b"max-age=31536000; includeSubDomains"))
         if not path.startswith(f"{API_PREFIX}/docs"):  # Swagger UI runs inline scripts
-            extra.append((b"content-security-policy", _csp(scope)))
+            extra.append((b"content-security-policy", CSP))
 
         async def send_with_headers(message: Message) -> None:
             if message["type"] == "http.response.start":
@@ -174,7 +170,12 @@ class SecurityHeadersMiddleware:
                 names = {k.lower() for k, _ in headers}
                 if path.startswith(API_PREFIX) and b"cache-control" not in names:
                     headers.append((b"cache-control", b"no-store"))
-                message["headers"] = headers + extra
+                # A response with a policy of its own keeps it (the framed 3D view's page,
+                # web.viewer.proxy): two policies would both apply, the stricter winning.
+                own = b"content-security-policy" in names
+                message["headers"] = headers + [
+                    h for h in extra if not (own and h[0] == b"content-security-policy")
+                ]
             await send(message)
 
         await self.app(scope, receive, send_with_headers)

@@ -6,6 +6,7 @@ import csv
 import io
 import json
 import re
+import time
 
 import numpy as np
 import pytest
@@ -15,6 +16,12 @@ from app.core import media
 from tests.browser.conftest import COACH, analysis_diagnosis, sign_in
 
 pytestmark = pytest.mark.browser
+
+
+def _pixels_of(png: bytes) -> np.ndarray:
+    from PIL import Image
+
+    return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
 
 
 def canvas_colours(page, selector: str) -> tuple[int, int]:
@@ -272,6 +279,51 @@ def test_two_viewers_each_see_their_own_analysis(server, browser, clip, clip_res
     # Neither performer can open the other's analysis.
     assert pa.goto(f"{server.url}/analyses/{b}").status == 404
     for ctx, _, _ in pages:
+        ctx.close()
+
+
+def test_two_tabs_on_one_analysis_each_have_their_own_3d_view(server, browser, clip,
+                                                               clip_result):  # fmt: skip
+    """A coach and the performer look at one analysis: the coach seeking to the last frame
+    moves the coach's 3D view only. Both views come through the app's own origin."""
+    aid = server.add_done_analysis("pat", clip, clip_result)
+    n = len(clip_result["frames"])
+    tabs = []
+    for email, password in (("pat@example.com", None), COACH):
+        ctx = browser.new_context(viewport={"width": 1280, "height": 900})
+        page = ctx.new_page()
+        sign_in(page, server.url, email, *(() if password is None else (password,)),
+                next_path=f"/analyses/{aid}")  # fmt: skip
+        wait_results(page)
+        page.wait_for_selector("#viewer3d:not([hidden]), #fallback3d:not([hidden])",
+                               timeout=30_000)  # fmt: skip
+        if page.locator("#viewer3d").is_hidden():
+            pytest.skip(f"no 3D view here: {page.locator('#viewer-status').inner_text()}")
+        tabs.append((ctx, page))
+    (_, performer), (_, coach) = tabs
+    srcs = [p.locator("#viewer3d").get_attribute("src") for p in (performer, coach)]
+    assert all(s.startswith(f"/analyses/{aid}/3d/") for s in srcs) and srcs[0] != srcs[1]
+
+    def view(page) -> np.ndarray:  # what the tab's 3D view shows now
+        return _pixels_of(page.locator("#viewer3d").screenshot())
+
+    def changed(a: np.ndarray, b: np.ndarray) -> int:
+        return int((np.abs(a.astype(int) - b.astype(int)).max(-1) > 40).sum())
+
+    for p in (performer, coach):
+        p.frame_locator("#viewer3d").locator("canvas").first.wait_for(timeout=20_000)
+        p.wait_for_timeout(2500)  # connected, drawn at the tab's frame
+    before = {id(p): view(p) for p in (performer, coach)}
+    go_to_frame(coach, n - 1)  # the swing's end: another posture
+    deadline = time.monotonic() + 20
+    while changed(before[id(coach)], view(coach)) < 300 and time.monotonic() < deadline:
+        coach.wait_for_timeout(300)
+    moved = changed(before[id(coach)], view(coach))
+    performer.wait_for_timeout(1500)  # long enough for a shared view to have moved too
+    still = changed(before[id(performer)], view(performer))
+    assert moved >= 300 and still < 50, (moved, still)
+    assert performer.evaluate("document.getElementById('analysis').dataset.frame") == "0"
+    for ctx, _ in tabs:
         ctx.close()
 
 

@@ -9,6 +9,9 @@
   const base = "/api/v1/analyses/" + id;
   const $ = function (s) { return document.getElementById(s); };
   const SVGNS = "http://www.w3.org/2000/svg";
+  // This tab's own 3D view: the token in its frame's address (web/viewer/proxy.py); seeking
+  // here moves this tab's view only. getRandomValues works on plain http too.
+  const TAB = Array.from(crypto.getRandomValues(new Uint8Array(16)), function (b) { return b.toString(16).padStart(2, "0"); }).join("");
   // The bones in the result's order, in a coach's words (one table, served with the page).
   const BONES = coach.BONE_IDS.map(function (_, b) { return coach.boneLabel(b); });
   const PARENT = [0, 1, 2, 0, 4, 5, 0, 7, 8, 9, 10, 8, 12, 13, 8, 15];
@@ -70,7 +73,7 @@
       liveBusy = true;
       try {
         const v = await coach.api(base + "/viewer/live", { method: "POST" });
-        if (!iframe.getAttribute("src")) iframe.src = v.url;
+        if (!iframe.getAttribute("src")) iframe.src = v.url + TAB + "/";
         fig.hidden = false;
         fig.dataset.phase = v.phase;
         fig.dataset.framesDone = String(v.frames_done);
@@ -480,7 +483,7 @@
     try {
       const v = await coach.api(base + "/viewer", { method: "POST" });
       const frameEl = $("viewer3d");
-      frameEl.src = v.url;
+      frameEl.src = v.url + TAB + "/";
       frameEl.hidden = false;
       $("viewer-status").textContent = "3D view: drag to orbit, scroll to zoom. It follows the timeline.";
       viewerReady = true;
@@ -499,7 +502,7 @@
       syncTimer = null;
       if (synced === frame) return;
       synced = frame;
-      coach.api(base + "/viewer/frame", { method: "POST", json: { frame: frame } }).catch(function () {});
+      coach.api(base + "/viewer/frame", { method: "POST", json: { frame: frame, tab: TAB } }).catch(function () {});
     }, 120);
   }
   function draw3dFallback() {

@@ -19,6 +19,7 @@ from app.api.errors import ApiError
 from app.core import media
 from app.core.reflect import reflect
 from web.live import NothingToShowYet, ViewerUnavailable, get_viewers
+from web.viewer.proxy import TAB_PATTERN, viewer_path
 
 router = APIRouter(prefix="/api/v1/analyses/{analysis_id}/viewer", include_in_schema=False)
 
@@ -28,7 +29,8 @@ async def start_viewer(
     analysis_id: str, request: Request, who: CurrentPrincipal, session: SessionDep,
     notifier: NotifierDep,
 ):  # fmt: skip
-    """The finished analysis' 3D view: its port and URL."""
+    """The finished analysis' 3D view: where the page frames it (a tab token and "/" follow,
+    :mod:`web.viewer.proxy`)."""
     a = done_analysis(session, who, analysis_id, notifier)
     result = result_of(a)
     bvh = a.reference.bvh_path
@@ -37,11 +39,10 @@ async def start_viewer(
         return media.reference_joints(bvh), result
 
     try:
-        port = await run_in_threadpool(get_viewers().ensure, a.id, load)
+        await run_in_threadpool(get_viewers().ensure, a.id, load)
     except ViewerUnavailable as exc:
         raise ApiError(503, "viewer_unavailable", str(exc)) from None
-    host = request.url.hostname or "127.0.0.1"
-    return {"port": port, "url": f"{request.url.scheme}://{host}:{port}/"}
+    return {"url": viewer_path(a.id)}
 
 
 @router.post("/live")
@@ -59,17 +60,18 @@ async def start_live_viewer(
     if a.status in ("failed", "cancelled") or not a.work_dir:
         raise ApiError(409, "not_ready", f"the analysis is {a.status}", {"status": a.status})
     try:
-        port, state = await run_in_threadpool(get_viewers().ensure_running, a.id, a.work_dir)
+        _, state = await run_in_threadpool(get_viewers().ensure_running, a.id, a.work_dir)
     except NothingToShowYet as exc:
         raise ApiError(409, "not_ready", str(exc), {"status": a.status}) from None
     except ViewerUnavailable as exc:
         raise ApiError(503, "viewer_unavailable", str(exc)) from None
-    host = request.url.hostname or "127.0.0.1"
-    return {"port": port, "url": f"{request.url.scheme}://{host}:{port}/", **state}
+    return {"url": viewer_path(a.id), **state}
 
 
 class FrameBody(BaseModel):
     frame: int = Field(ge=0, le=1_000_000)
+    #: The browser tab whose 3D view moves (the token in its frame's address).
+    tab: str = Field(pattern=TAB_PATTERN)
 
 
 @router.post("/frame", status_code=204)
@@ -78,5 +80,5 @@ async def viewer_frame(
     session: SessionDep,
 ):  # fmt: skip
     a = analysis_for(session, who, analysis_id)
-    await run_in_threadpool(get_viewers().set_frame, a.id, body.frame)
+    await run_in_threadpool(get_viewers().set_frame, a.id, body.frame, body.tab)
     return Response(status_code=204)

@@ -85,8 +85,24 @@ def bone_colours(
 
 
 @dataclass
+class View:
+    """What one viewer sees: its scene handles, its GUI, its frame and colouring.
+
+    ``target`` is the :class:`viser.ViserServer` (the shared view: recordings, and what a
+    client sees before its own view exists) or one :class:`viser.ClientHandle` (a browser
+    tab's own view, whose scene nodes shadow the shared ones of the same name).
+    """
+
+    target: Any
+    handles: dict[str, Any] = field(default_factory=dict)
+    current: int = 0
+    #: Colour bones by the expert's range (red at this z) instead of degrees; None: degrees.
+    z_limit: float | None = None
+
+
+@dataclass
 class ViewerScene:
-    """Handles of a built scene; ``set_frame`` shows one video frame.
+    """A built scene; ``set_frame`` shows one video frame in one view.
 
     Attributes
     ----------
@@ -94,6 +110,10 @@ class ViewerScene:
         ``result.frames``.
     reference_joints : ndarray, shape (T, 17, 3)
         The BVH as given (frame numbers of the result index it directly).
+    view : View
+        The server-wide view.
+    clients : dict of int to View
+        With ``per_client``: each connected client's own view, by viser client id.
     """
 
     server: viser.ViserServer
@@ -102,12 +122,32 @@ class ViewerScene:
     fps: float
     segments: tuple[ResultSegment, ...] = ()
     result_doc: Mapping[str, Any] = field(default_factory=dict)
-    handles: dict[str, Any] = field(default_factory=dict)
-    current: int = 0
-    #: Colour bones by the expert's range (red at this z) instead of degrees; None: degrees.
-    z_limit: float | None = None
+    view: View | None = None
+    clients: dict[int, View] = field(default_factory=dict)
+    #: Frames asked for clients whose view does not exist yet (shown when it does).
+    wanted: dict[int, int] = field(default_factory=dict)
+    gui: bool = True
+    look_at: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    _lock: threading.Lock = field(default_factory=threading.Lock)
     _stop: threading.Event = field(default_factory=threading.Event)
     _thread: threading.Thread | None = None
+
+    @property
+    def handles(self) -> dict[str, Any]:
+        """The shared view's handles."""
+        assert self.view is not None
+        return self.view.handles
+
+    @property
+    def current(self) -> int:
+        assert self.view is not None
+        return self.view.current
+
+    @property
+    def z_limit(self) -> float | None:
+        """The shared view's colouring: None for degrees, else red at this bone z."""
+        assert self.view is not None
+        return self.view.z_limit
 
     def postures(self, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(reference (17, 3), selected (17, 3), other candidates (K-1, 17, 3)) of frame i,
@@ -120,17 +160,31 @@ class ViewerScene:
         others = np.delete(cands, f.selected, axis=0) if len(cands) > 1 else cands[:0]
         return ref, sel, others
 
-    def set_frame(self, i: int) -> None:
-        """Show video frame index ``i`` (into ``frames``)."""
+    def set_frame(self, i: int, client_id: int | None = None) -> None:
+        """Show video frame index ``i`` (into ``frames``) in the shared view, or in client
+        ``client_id``'s own view (remembered until that view exists)."""
+        if client_id is None:
+            assert self.view is not None
+            self.show(self.view, i)
+            return
+        with self._lock:
+            view = self.clients.get(client_id)
+            if view is None:
+                self.wanted[client_id] = int(i)
+                return
+        self.show(view, i)
+
+    def show(self, view: View, i: int) -> None:
+        """Show frame ``i`` in ``view``."""
         i = int(np.clip(i, 0, len(self.frames) - 1))
-        self.current = i
+        view.current = i
         ref, sel, others = self.postures(i)
         f = self.frames[i]
-        h = self.handles
-        with self.server.atomic():
+        h = view.handles
+        with view.target.atomic():
             h["reference"].points = _segments_of(ref).astype(np.float32)
             h["performer"].points = _segments_of(sel).astype(np.float32)
-            h["performer"].colors = _rgb_pairs(bone_colours(f, z_limit=self.z_limit))
+            h["performer"].colors = _rgb_pairs(bone_colours(f, z_limit=view.z_limit))
             if len(others):
                 h["candidates"].points = _segments_of(others).reshape(-1, 2, 3).astype(np.float32)
             else:
@@ -150,6 +204,27 @@ class ViewerScene:
             h["label"].position = tuple(float(x) for x in top)
         if "slider" in h and h["slider"].value != i:
             h["slider"].value = i
+
+    def add_client(self, client: Any) -> None:
+        """A browser tab connected: its own view (handles shadowing the shared ones, its own
+        GUI), at the frame asked for it, or the shared view's."""
+        view = View(client)
+        _add_handles(view, self.look_at)
+        if self.gui:
+            _add_gui(self, view)
+        with self._lock:
+            self.clients[client.client_id] = view
+            start = self.wanted.pop(client.client_id, None)
+        self.show(view, self.current if start is None else start)
+
+    def drop_client(self, client: Any) -> None:
+        with self._lock:
+            self.clients.pop(client.client_id, None)
+            self.wanted.pop(client.client_id, None)
+
+    def views(self) -> list[View]:
+        with self._lock:
+            return [v for v in (self.view, *self.clients.values()) if v is not None]
 
     def close(self) -> None:
         """Stop the play thread."""
@@ -216,6 +291,7 @@ def build_scene(
     result: Result | Mapping[str, Any],
     *,
     gui: bool = True,
+    per_client: bool = False,
 ) -> ViewerScene:
     """Add an analysis to a viser server.
 
@@ -228,6 +304,10 @@ def build_scene(
         A result, or its document (DESIGN.md).
     gui : bool
         Add the GUI (slider, play, candidates toggle, legend, segments).
+    per_client : bool
+        Give every connecting browser tab its own view: its own frame, slider, colouring
+        and candidate toggle (issue 21 item 2), moved by ``set_frame(i, client_id)``. The
+        GUI is then per client only; without it, one GUI and one frame for everyone.
 
     Returns
     -------
@@ -239,9 +319,10 @@ def build_scene(
     if not result.frames:
         raise ValueError("result: no frames to show")
     scene = ViewerScene(server, ref, result.frames, result.video.fps, result.segments,
-                        result_doc=result.doc)  # fmt: skip
+                        result_doc=result.doc, gui=gui)  # fmt: skip
     server.scene.set_up_direction("+y")
     look_at, position, floor = frame_body(scene)
+    scene.look_at = look_at
     server.scene.add_grid(
         "/ground", width=3, height=3, plane="xz", position=(look_at[0], floor, look_at[2])
     )
@@ -250,39 +331,53 @@ def build_scene(
     server.initial_camera.fov = np.radians(CAMERA_FOV_DEG)
     server.initial_camera.look_at = tuple(look_at)
     server.initial_camera.position = tuple(position)
-    zero = np.zeros((16, 2, 3), np.float32)
-    h = scene.handles
-    h["candidates"] = server.scene.add_line_segments(
-        "/candidates", zero, CANDIDATE_RGB, thickness=3, thickness_units="screen"
-    )
-    h["image_best"] = server.scene.add_line_segments(
-        "/image_best", zero, IMAGE_BEST_RGB, thickness=5, thickness_units="screen"
-    )
-    h["reference"] = server.scene.add_line_segments(
-        "/reference", zero, REFERENCE_RGB, thickness=6, thickness_units="screen"
-    )
-    h["performer"] = server.scene.add_line_segments(
-        "/performer", zero, np.zeros((16, 2, 3), np.uint8), thickness=8, thickness_units="screen"
-    )
-    h["label"] = server.scene.add_label("/label", "", position=tuple(look_at + (0.0, 1.2, 0.0)))
+    scene.view = View(server)
+    _add_handles(scene.view, look_at)
+    if gui and not per_client:
+        _add_gui(scene, scene.view)
+    scene.show(scene.view, 0)
+    if per_client:
+        server.on_client_connect(scene.add_client)  # also replayed for connected clients
+        server.on_client_disconnect(scene.drop_client)
     if gui:
-        _add_gui(scene)
-    scene.set_frame(0)
+        scene._thread = threading.Thread(target=_play, args=(scene,), name="viewer-play",
+                                         daemon=True)  # fmt: skip
+        scene._thread.start()
     return scene
 
 
-def _add_gui(scene: ViewerScene) -> None:
-    server, h, n = scene.server, scene.handles, len(scene.frames)
-    slider = server.gui.add_slider("frame", min=0, max=max(n - 1, 1), step=1, initial_value=0)
-    play = server.gui.add_checkbox("play", initial_value=False)
-    show = server.gui.add_checkbox("other candidates", initial_value=True)
-    server.gui.add_html(_legend_html())
+def _add_handles(view: View, look_at: np.ndarray) -> None:
+    """The scene nodes of one view (line segments and the frame's label)."""
+    api = view.target.scene
+    zero = np.zeros((16, 2, 3), np.float32)
+    h = view.handles
+    h["candidates"] = api.add_line_segments(
+        "/candidates", zero, CANDIDATE_RGB, thickness=3, thickness_units="screen"
+    )
+    h["image_best"] = api.add_line_segments(
+        "/image_best", zero, IMAGE_BEST_RGB, thickness=5, thickness_units="screen"
+    )
+    h["reference"] = api.add_line_segments(
+        "/reference", zero, REFERENCE_RGB, thickness=6, thickness_units="screen"
+    )
+    h["performer"] = api.add_line_segments(
+        "/performer", zero, np.zeros((16, 2, 3), np.uint8), thickness=8, thickness_units="screen"
+    )
+    h["label"] = api.add_label("/label", "", position=tuple(look_at + (0.0, 1.2, 0.0)))
+
+
+def _add_gui(scene: ViewerScene, view: View) -> None:
+    gui, h, n = view.target.gui, view.handles, len(scene.frames)
+    slider = gui.add_slider("frame", min=0, max=max(n - 1, 1), step=1, initial_value=0)
+    play = gui.add_checkbox("play", initial_value=False)
+    show = gui.add_checkbox("other candidates", initial_value=True)
+    gui.add_html(_legend_html())
     h.update(slider=slider, play=play, show_candidates=show)
 
     @slider.on_update
     def _(_event: Any) -> None:
-        if int(slider.value) != scene.current:
-            scene.set_frame(int(slider.value))
+        if int(slider.value) != view.current:
+            scene.show(view, int(slider.value))
 
     @show.on_update
     def _(_event: Any) -> None:
@@ -291,7 +386,7 @@ def _add_gui(scene: ViewerScene) -> None:
     if all(f.bone_z is not None for f in scene.frames):  # a reference built from takes
         limit = float(((scene.result_doc.get("domain") or {}).get("variation") or {})
                       .get("z_limit", 3.0))  # fmt: skip
-        by = server.gui.add_dropdown(
+        by = gui.add_dropdown(
             "colour by", ("degrees", "expert's range"), initial_value="degrees",
             hint=f"expert's range: red where a bone is {limit:g} times the expert's own spread",
         )  # fmt: skip
@@ -299,27 +394,29 @@ def _add_gui(scene: ViewerScene) -> None:
 
         @by.on_update
         def _(_event: Any) -> None:
-            scene.z_limit = limit if by.value == "expert's range" else None
-            scene.set_frame(scene.current)
+            view.z_limit = limit if by.value == "expert's range" else None
+            scene.show(view, view.current)
 
     t_to_i = {f.t: i for i, f in enumerate(scene.frames)}
-    with server.gui.add_folder("segments"):
+    with gui.add_folder("segments"):
         for j, s in enumerate(scene.segments):
             worst = t_to_i.get(s.performer_start if s.worst_frame is None else s.worst_frame, 0)
-            label = f"{s.name or j + 1}: {s.mean_error_deg:.1f} deg"
+            label = f"{s.name or j + 1}: {s.mean_error_deg:.1f}°"
             if (s.status or "ok") != "ok":
                 label += f" ({s.status})"
-            button = server.gui.add_button(label)
-            button.on_click(lambda _e, i=worst: scene.set_frame(i))
+            button = gui.add_button(label)
+            button.on_click(lambda _e, i=worst: scene.show(view, i))
             h[f"segment_{j}"] = button
 
-    def loop() -> None:
-        while not scene._stop.wait(1.0 / max(scene.fps, 1.0)):
-            if play.value:
-                scene.set_frame((scene.current + 1) % n)
 
-    scene._thread = threading.Thread(target=loop, name="viewer-play", daemon=True)
-    scene._thread.start()
+def _play(scene: ViewerScene) -> None:
+    """Advance every view whose "play" box is ticked, at the video's frame rate."""
+    n = len(scene.frames)
+    while not scene._stop.wait(1.0 / max(scene.fps, 1.0)):
+        for view in scene.views():
+            play = view.handles.get("play")
+            if play is not None and play.value:
+                scene.show(view, (view.current + 1) % n)
 
 
 def record_scene(scene: ViewerScene, *, stride: int = 1) -> bytes:
