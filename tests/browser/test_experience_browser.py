@@ -60,8 +60,8 @@ def test_3d_view_frames_the_body_with_the_panel_collapsed(
     assert count > 2000 and height > 0.4, (count, height, width)
     # The control panel starts minimised: its frame slider is not shown over the scene.
     assert (
-        frame.get_by_text("other candidates").count() == 0
-        or not frame.get_by_text("other candidates").first.is_visible()
+        frame.get_by_text("other possible postures").count() == 0
+        or not frame.get_by_text("other possible postures").first.is_visible()
     )
     assert page.locator("#legend3d").is_visible()
     ctx.close()

@@ -101,7 +101,7 @@ def test_viewer_loads_in_chromium(server, analysis, browser):
         page.wait_for_selector("canvas", timeout=20_000)
         page.wait_for_timeout(1500)
         assert page.locator("canvas").count() >= 1
-        assert page.get_by_text("other candidates").count() >= 1
+        assert page.get_by_text("other possible postures").count() >= 1
         page.screenshot(path=str(shot))
         page.close()
     finally:
@@ -151,5 +151,24 @@ def test_a_result_without_the_experts_range_has_no_colour_switch(server, analysi
     scene = build_scene(server, ref, doc)
     try:
         assert "colour_by" not in scene.handles
+    finally:
+        scene.close()
+
+
+def test_the_expert_can_stand_beside_the_performer(server, analysis):
+    ref, doc = analysis
+    scene = build_scene(server, ref, doc)
+    try:
+        scene.set_frame(8)
+        over = scene.handles["reference"].points.copy()
+        scene.handles["side_by_side"].value = True
+        scene.set_frame(8)
+        beside = scene.handles["reference"].points
+        np.testing.assert_allclose(beside - over, np.broadcast_to([0.9, 0.0, 0.0], over.shape),
+                                   atol=1e-5)  # fmt: skip
+        # the performer stays where they are
+        scene.handles["side_by_side"].value = False
+        scene.set_frame(8)
+        np.testing.assert_allclose(scene.handles["reference"].points, over, atol=1e-6)
     finally:
         scene.close()

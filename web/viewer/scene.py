@@ -36,6 +36,9 @@ CAMERA_FOV_DEG = 50.0
 #: reference faces +z at frame 0), a little to the body's left and above, so depth is visible.
 CAMERA_DIRECTION = np.array([0.45, 0.3, 1.0])
 LABEL_LIFT = np.array([0.0, 0.25, 0.0])
+#: Where the expert stands in the side-by-side layout: a body's width and a half to the side
+#: (world x), so that two arms' lengths never overlap.
+SIDE_BY_SIDE_M = np.array([0.9, 0.0, 0.0])
 #: Fraction of the view's height the body's tallest extent fills.
 FILL = 0.8
 
@@ -98,6 +101,8 @@ class View:
     current: int = 0
     #: Colour bones by the expert's range (red at this z) instead of degrees; None: degrees.
     z_limit: float | None = None
+    #: Draw the expert beside the performer (SIDE_BY_SIDE_M to the side) instead of over them.
+    side_by_side: bool = False
 
 
 @dataclass
@@ -179,6 +184,8 @@ class ViewerScene:
         i = int(np.clip(i, 0, len(self.frames) - 1))
         view.current = i
         ref, sel, others = self.postures(i)
+        if view.side_by_side:
+            ref = ref + SIDE_BY_SIDE_M
         f = self.frames[i]
         h = view.handles
         with view.target.atomic():
@@ -278,8 +285,8 @@ def _legend_html() -> str:
         f"<div style='height:12px;background:linear-gradient(to right,{stops})'></div>"
         f"<div style='display:flex;justify-content:space-between'><span>0&deg;</span>"
         f"<span>{ERROR_RED_DEG / 2:.0f}&deg;</span><span>&ge;{ERROR_RED_DEG:.0f}&deg;</span></div>"
-        "<div><span style='color:rgb(110,130,200)'>&#9632;</span> reference "
-        "<span style='color:#aaa'>&#9632;</span> other candidates</div>"
+        "<div><span style='color:rgb(110,130,200)'>&#9632;</span> the expert "
+        "<span style='color:#aaa'>&#9632;</span> other possible postures</div>"
         f"<div><span style='color:rgb{MISFIT_RGB}'>&#9632;</span> what the video shows where it "
         "disagrees</div><div>paler: the video cannot tell the bone's depth</div></div>"
     )
@@ -370,9 +377,16 @@ def _add_gui(scene: ViewerScene, view: View) -> None:
     gui, h, n = view.target.gui, view.handles, len(scene.frames)
     slider = gui.add_slider("frame", min=0, max=max(n - 1, 1), step=1, initial_value=0)
     play = gui.add_checkbox("play", initial_value=False)
-    show = gui.add_checkbox("other candidates", initial_value=True)
+    show = gui.add_checkbox("other possible postures", initial_value=True)
+    beside = gui.add_checkbox("expert beside you", initial_value=False,
+                              hint="off: the expert is drawn over you, hips together")  # fmt: skip
     gui.add_html(_legend_html())
-    h.update(slider=slider, play=play, show_candidates=show)
+    h.update(slider=slider, play=play, show_candidates=show, side_by_side=beside)
+
+    @beside.on_update
+    def _(_event: Any) -> None:
+        view.side_by_side = bool(beside.value)
+        scene.show(view, view.current)
 
     @slider.on_update
     def _(_event: Any) -> None:
