@@ -16,7 +16,15 @@ from app import models
 from app.api.errors import ApiError
 from app.models import Analysis, Reference
 from app.schemas import SegmentPublic
-from engine.body.skeleton import BONE_CHILD, BONE_LABELS, BONE_NAMES, BONE_PARENT, bone_label
+from engine.body.limits import JOINT_ANGLES, joint_angles_deg
+from engine.body.skeleton import (
+    BEND_LABELS,
+    BONE_CHILD,
+    BONE_LABELS,
+    BONE_NAMES,
+    BONE_PARENT,
+    bone_label,
+)
 from engine.errors import InvalidInput
 from engine.io.result_reader import Result, ResultFrame, ResultSegment, as_result
 from engine.report import tempo_words
@@ -132,3 +140,28 @@ def page_summary(analysis: Analysis, result: Result) -> dict[str, Any]:
         "bone_labels": list(BONE_LABELS),
         "segments": out,
     }
+
+
+def bend_angles(result: Result, reference_joints: np.ndarray) -> dict[str, Any]:
+    """Every joint's bend (the angle between a bone and the one before it, 0 when straight)
+    in every video frame, the performer's and the expert's at the matched moment C(t').
+
+    Bends do not depend on where each body stands or faces, so the performer's 3D posture
+    and the reference's are compared as they are. ``reference_joints`` is (T, 17, 3).
+
+    Returns
+    -------
+    dict
+        ``bends``: per bend its ``label`` ("left knee") and ``joint`` (where it is, a joint
+        index of the data contract); ``performer`` and ``expert``: (frames, bends) degrees.
+    """
+    ref = np.asarray(reference_joints, float)
+    frames = np.clip([f.reference_frame for f in result.frames], 0, len(ref) - 1)
+    perf = joint_angles_deg(result.joints_3d) if result.frames else np.zeros((0, 13))
+    expert = joint_angles_deg(ref[frames]) if result.frames else np.zeros((0, 13))
+    return {
+        "bends": [{"label": BEND_LABELS[b], "joint": int(BONE_PARENT[b])}
+                  for _, _, b in JOINT_ANGLES],
+        "performer": np.round(perf, 1).tolist(),
+        "expert": np.round(expert, 1).tolist(),
+    }  # fmt: skip

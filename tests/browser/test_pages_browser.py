@@ -249,6 +249,37 @@ def test_coach_review_comments_persist_and_exports_parse(server, browser, clip, 
     ctx.close()
 
 
+def test_clicking_a_joint_reads_its_bend_for_the_performer_and_the_expert(
+    server, browser, clip, clip_result, shots
+):
+    aid = server.add_done_analysis("pat", clip, clip_result)
+    ctx = browser.new_context(viewport={"width": 1280, "height": 1000})
+    page = ctx.new_page()
+    sign_in(page, server.url, "pat@example.com", next_path=f"/analyses/{aid}")
+    wait_results(page)
+    page.wait_for_function("() => document.querySelectorAll('#angle-joint option').length > 13")
+    knee = clip_result["frames"][0]["joints_2d"][2]  # the left knee, video pixels
+    box = page.locator("#overlay").bounding_box()
+    w, h = clip_result["video"]["width"], clip_result["video"]["height"]
+    page.mouse.click(box["x"] + knee[0] * box["width"] / w, box["y"] + knee[1] * box["height"] / h)
+    assert page.locator("#angle-joint option:checked").inner_text() == "Left knee"
+    text = page.locator("#angle-readout").inner_text()
+    angles = page.request.get(f"{server.url}/api/v1/analyses/{aid}/angles").json()
+
+    def js_round(x: float) -> int:  # Math.round: halves up (Python's round goes to even)
+        return int(np.floor(x + 0.5))
+
+    you, expert = js_round(angles["performer"][0][1]), js_round(angles["expert"][0][1])
+    assert text.startswith(f"you {you}°, the expert {expert}°"), text
+    # it follows the frame
+    go_to_frame(page, 3)
+    assert page.locator("#angle-readout").inner_text().startswith(
+        f"you {js_round(angles['performer'][3][1])}°"
+    )
+    page.locator(".video-wrap").screenshot(path=str(shots / "joint-angle.png"))
+    ctx.close()
+
+
 def test_two_viewers_each_see_their_own_analysis(server, browser, clip, clip_result):
     other = dict(clip_result)
     other["frames"] = [dict(f, bone_errors_deg=[0.0] * 16, posture_error_deg=0.0)

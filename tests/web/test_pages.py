@@ -317,3 +317,30 @@ def test_every_bone_and_bend_has_a_coach_word():
     assert [b is None for b in BEND_LABELS] == [int(p) == 0 for p in BONE_PARENT]
     assert bone_label("l_elbow") == "left upper arm" == bone_label("l_shoulder->l_elbow")
     assert bone_label("tail") == "tail"
+
+
+def test_each_joints_bend_the_performers_and_the_experts(env):
+    """/angles: 13 bends per frame, the performer's from the result's 3D posture, the
+    expert's from the reference at the matched frame C(t')."""
+    import numpy as np
+
+    from app.models import Reference
+
+    app, client, ids, _, settings = env
+    aid = add_done(app, settings, ids, ids["perf"])
+    theirs = add_done(app, settings, ids, ids["other"])
+    sign_in(client, "p@a.org")
+    r = client.get(f"/api/v1/analyses/{aid}/angles")
+    assert r.status_code == 200, r.text
+    d = r.json()
+    assert [b["label"] for b in d["bends"]][:2] == ["left hip", "left knee"]
+    assert d["bends"][1]["joint"] == JOINTS.index("l_knee")
+    doc = fake_result()
+    want = media.joint_angles_deg(np.array([f["joints_3d"] for f in doc["frames"]]))
+    np.testing.assert_allclose(d["performer"], want, atol=0.06)
+    with app.state.sessionmaker() as s:
+        bvh = s.get(Reference, ids["ref"]).bvh_path
+    ref = media.reference_joints(bvh)
+    idx = [min(f["reference_frame"], len(ref) - 1) for f in doc["frames"]]
+    np.testing.assert_allclose(d["expert"], media.joint_angles_deg(ref[idx]), atol=0.06)
+    assert client.get(f"/api/v1/analyses/{theirs}/angles").status_code == 404

@@ -137,7 +137,7 @@
     $("legend-image-best").hidden = !anyBest;
     $("legend3d-image-best").hidden = !anyBest;
     $("expert-toggle").hidden = !result.frames.every(function (f) { return f.expert_joints_2d; });
-    buildBonePicks(); buildPlot(); buildSegments(); loadComments(); start3d();
+    buildBonePicks(); buildPlot(); buildSegments(); loadComments(); start3d(); loadAngles();
     $("plot").setAttribute("aria-valuemax", String(n - 1));
     setFrame(0, true);
     root.dataset.ready = "true";
@@ -193,7 +193,7 @@
     root.dataset.frame = String(f);
     const shown = outside ? Math.floor(video.currentTime * fps + 1e-3) : f + first;
     $("frame-label").textContent = "frame " + shown + " / " + (first + n - 1) + " · " + (shown / fps).toFixed(2) + " s" + (outside ? " · not analysed" : "");
-    drawOverlay(); moveCursor(); markSegment(); sync3d();
+    drawOverlay(); moveCursor(); markSegment(); sync3d(); showAngle();
   }
   function tick() {
     if (loopSegment()) { requestAnimationFrame(tick); return; }
@@ -246,6 +246,12 @@
     }
     ctx.fillStyle = "#fff";
     p.forEach(function (q) { ctx.beginPath(); ctx.arc(q[0], q[1], w * 0.6, 0, 2 * Math.PI); ctx.fill(); });
+    const measured = angleBend();
+    if (measured) {  // the joint being measured: a ring around it
+      const q = p[measured.joint];
+      ctx.strokeStyle = "#fff"; ctx.lineWidth = w * 0.6;
+      ctx.beginPath(); ctx.arc(q[0], q[1], w * 3, 0, 2 * Math.PI); ctx.stroke();
+    }
     // Where the video disagrees: the posture that fits the video best, dashed.
     const g = fr.image_best_joints_2d;
     if (!g) return;
@@ -376,6 +382,45 @@
     if (step) { ev.preventDefault(); video.pause(); seek(frame + step); }
     if (ev.key === "Home") { ev.preventDefault(); seek(0); }
     if (ev.key === "End") { ev.preventDefault(); seek(n - 1); }
+  });
+
+  // ---------------------------------------------------------------- joint angles
+  // Click a joint on the video (or pick it in the list): its bend now, yours and the
+  // expert's at the matched moment (API /angles; 0 deg is a straight joint).
+  let angles = null;
+  async function loadAngles() {
+    try { angles = await coach.api(base + "/angles"); } catch (e) { return; }
+    const sel = $("angle-joint");
+    angles.bends.forEach(function (b, k) {
+      sel.append(coach.el("option", { value: String(k), text: b.label.charAt(0).toUpperCase() + b.label.slice(1) }));
+    });
+  }
+  function angleBend() {
+    const k = $("angle-joint").value;
+    return angles && k !== "" ? Object.assign({ index: +k }, angles.bends[+k]) : null;
+  }
+  function showAngle() {
+    const out = $("angle-readout"), b = angleBend();
+    if (!b || outside) { out.textContent = ""; return; }
+    const you = angles.performer[frame][b.index], them = angles.expert[frame][b.index];
+    const d = you - them;
+    const how = Math.abs(d) < 1 ? "as the expert" : Math.round(Math.abs(d)) + "° " + (d > 0 ? "more" : "less") + " bent than the expert";
+    out.textContent = "you " + Math.round(you) + "°, the expert " + Math.round(them) + "°: " + how;
+  }
+  $("angle-joint").addEventListener("change", function () { drawOverlay(); showAngle(); });
+  $("stage-box").addEventListener("click", function (ev) {
+    if (!angles || !result || outside) return;
+    const r = overlay.getBoundingClientRect();
+    const u = (ev.clientX - r.left) * overlay.width / r.width, v = (ev.clientY - r.top) * overlay.height / r.height;
+    const p = result.frames[frame].joints_2d;
+    let best = -1, dist = overlay.height * 0.06;  // a joint within 6 % of the picture's height
+    angles.bends.forEach(function (b, k) {
+      const d = Math.hypot(p[b.joint][0] - u, p[b.joint][1] - v);
+      if (d < dist) { dist = d; best = k; }
+    });
+    if (best < 0) return;
+    $("angle-joint").value = String(best);
+    drawOverlay(); showAngle();
   });
 
   // ---------------------------------------------------------------- segments

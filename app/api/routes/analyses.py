@@ -338,6 +338,21 @@ def read_segments(
 
 
 @router.get(
+    "/{analysis_id}/angles",
+    summary="Each joint's bend in every frame: the performer's and the expert's",
+    description="`bends` (label, joint index), `performer` and `expert` as (frames, bends) "
+    "degrees, 0 for a straight joint; the expert's at the matched moment. " + ONE_CAMERA_NOTE,
+    responses=errors(404, 409),
+)
+def read_angles(
+    analysis_id: str, who: CurrentPrincipal, session: SessionDep, notifier: NotifierDep
+) -> dict[str, Any]:
+    analysis = done_analysis(session, who, analysis_id, notifier)
+    ref = media.reference_joints(analysis.reference.bvh_path)
+    return summary.bend_angles(result_of(analysis), ref)
+
+
+@router.get(
     "/{analysis_id}/summary",
     summary="What the result page shows: named segments with tempo, score and worst bones",
     description=ONE_CAMERA_NOTE,
