@@ -384,7 +384,7 @@ def test_coach_dashboard_and_references(server, browser, clip, clip_result, shot
     page.wait_for_function(
         "() => document.querySelectorAll('.ref-card').length === 2", timeout=30_000
     )
-    card = page.locator(".ref-card").first
+    card = page.locator(".ref-card", has_text="Second swing")
     # the detected segments of the upload (64_29: three) are counted for the coach
     card.get_by_label("Segment names (3 segments, one a line").fill("address\nbackswing\ndownswing")
     card.get_by_text("Per-bone weights and tolerances").click()
@@ -395,7 +395,8 @@ def test_coach_dashboard_and_references(server, browser, clip, clip_result, shot
     page.screenshot(path=str(shots / "references.png"), full_page=True)
     page.reload()
     page.wait_for_selector(".ref-card")
-    assert "backswing" in page.locator(".ref-card").first.locator("textarea").input_value()
+    saved = page.locator(".ref-card", has_text="Second swing").locator("textarea")
+    assert "backswing" in saved.input_value()
     # Delete, after a confirmation: the demo reference has analyses and stays, with the reason
     demo = page.locator(".ref-card", has_text="CMU 64_29 (golf swing)")
     page.once("dialog", lambda d: d.accept())
@@ -404,10 +405,11 @@ def test_coach_dashboard_and_references(server, browser, clip, clip_result, shot
     second = page.locator(".ref-card", has_text="Second swing")
     page.once("dialog", lambda d: d.dismiss())  # changing one's mind keeps it
     second.get_by_role("button", name="Delete reference").click()
-    assert page.locator(".ref-card").count() == 2
+    assert second.count() == 1
+    kept = page.locator(".ref-card").count() - 1
     page.once("dialog", lambda d: d.accept())
     second.get_by_role("button", name="Delete reference").click()
-    page.wait_for_function("() => document.querySelectorAll('.ref-card').length === 1")
+    page.wait_for_function(f"() => document.querySelectorAll('.ref-card').length === {kept}")
     assert page.locator("#ref-done").inner_text() == "Deleted “Second swing”."
     ctx.close()
 

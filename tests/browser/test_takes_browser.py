@@ -100,3 +100,41 @@ def test_the_expert_drawn_over_the_video_slow_motion_and_loop(
     page.wait_for_timeout(int(3000 * end_s / 4) + 1500)
     t = page.evaluate("() => document.getElementById('video').currentTime")
     assert t <= end_s + 0.5 / fps, f"played on past the looped segment: {t:.2f} s"
+
+
+def test_side_by_side_stays_in_step_when_paused_and_stepped(server, browser, clip, clip_result,
+                                                            shots):  # fmt: skip
+    """'Side by side' draws the expert, in the performer's camera, beside the video; frame
+    stepping and pausing keep both at one frame: the head drawn where that frame puts it."""
+    import numpy as np
+
+    aid = server.add_done_analysis("pat", clip, clip_result)
+    page = browser.new_context(viewport={"width": 1280, "height": 1000}).new_page()
+    sign_in(page, server.url, "pat@example.com", next_path=f"/analyses/{aid}")
+    wait_results(page)
+    page.get_by_role("checkbox", name="Side by side").check()
+    assert page.locator("#side-box").is_visible()
+
+    def head_drawn(k: int) -> bool:
+        """The expert's head of result frame k is drawn on the side canvas (and the one of
+        another frame, far from it, is not)."""
+        u, v = clip_result["frames"][k]["expert_joints_2d"][16]
+        px = page.evaluate(
+            "([u, v]) => Array.from(document.getElementById('side-canvas').getContext('2d')"
+            ".getImageData(Math.round(u), Math.round(v), 1, 1).data)", [u, v],
+        )  # fmt: skip
+        return bool(np.abs(np.asarray(px[:3]) - [110, 130, 200]).max() <= 30)
+
+    page.evaluate("() => document.getElementById('video').pause()")
+    for _ in range(4):
+        k = int(page.evaluate("document.getElementById('analysis').dataset.frame"))
+        assert page.get_attribute("#side-canvas", "data-frame") == str(k)
+        assert head_drawn(k), k
+        page.get_by_role("button", name="Next frame").click()
+        page.wait_for_function(
+            f"() => document.getElementById('analysis').dataset.frame === '{k + 1}'"
+        )
+    page.locator(".video-wrap").screenshot(path=str(shots / "analysis-side-by-side.png"))
+    page.get_by_role("button", name="Previous frame").click()
+    k = int(page.evaluate("document.getElementById('analysis').dataset.frame"))
+    assert page.get_attribute("#side-canvas", "data-frame") == str(k) and head_drawn(k)

@@ -137,6 +137,8 @@
     $("legend-image-best").hidden = !anyBest;
     $("legend3d-image-best").hidden = !anyBest;
     $("expert-toggle").hidden = !result.frames.every(function (f) { return f.expert_joints_2d; });
+    $("side-toggle").hidden = $("expert-toggle").hidden;
+    $("side-canvas").width = result.video.width; $("side-canvas").height = result.video.height;
     buildBonePicks(); buildPlot(); buildSegments(); loadComments(); start3d(); loadAngles();
     $("plot").setAttribute("aria-valuemax", String(n - 1));
     setFrame(0, true);
@@ -193,7 +195,7 @@
     root.dataset.frame = String(f);
     const shown = outside ? Math.floor(video.currentTime * fps + 1e-3) : f + first;
     $("frame-label").textContent = "frame " + shown + " / " + (first + n - 1) + " · " + (shown / fps).toFixed(2) + " s" + (outside ? " · not analysed" : "");
-    drawOverlay(); moveCursor(); markSegment(); sync3d(); showAngle();
+    drawOverlay(); drawSide(); moveCursor(); markSegment(); sync3d(); showAngle();
   }
   function tick() {
     if (loopSegment()) { requestAnimationFrame(tick); return; }
@@ -382,6 +384,31 @@
     if (step) { ev.preventDefault(); video.pause(); seek(frame + step); }
     if (ev.key === "Home") { ev.preventDefault(); seek(0); }
     if (ev.key === "End") { ev.preventDefault(); seek(n - 1); }
+  });
+
+  // ---------------------------------------------------------------- side by side
+  // The expert beside your video, drawn in your camera at the matched moment: it is drawn
+  // from the same frame as the overlay, so pausing, stepping and scrubbing stay in step.
+  function drawSide() {
+    const c = $("side-canvas");
+    if ($("side-box").hidden || !result) return;
+    const ctx = c.getContext("2d");
+    ctx.fillStyle = "#1d2330"; ctx.fillRect(0, 0, c.width, c.height);
+    c.dataset.frame = String(frame);
+    const x = !outside && result.frames[frame].expert_joints_2d;
+    if (!x) return;
+    const w = Math.max(3, c.height / 60);
+    ctx.strokeStyle = EXPERT_GHOST; ctx.lineWidth = w; ctx.lineCap = "round";
+    for (let b = 0; b < 16; b++) {
+      ctx.beginPath(); ctx.moveTo(x[PARENT[b]][0], x[PARENT[b]][1]); ctx.lineTo(x[CHILD[b]][0], x[CHILD[b]][1]); ctx.stroke();
+    }
+    ctx.fillStyle = EXPERT_GHOST;
+    ctx.beginPath(); ctx.arc(x[16][0], x[16][1], w * 1.4, 0, 2 * Math.PI); ctx.fill();
+  }
+  $("show-side").addEventListener("change", function () {
+    $("side-box").hidden = !$("show-side").checked;
+    document.querySelector(".video-wrap").classList.toggle("side", $("show-side").checked);
+    drawSide();
   });
 
   // ---------------------------------------------------------------- joint angles
