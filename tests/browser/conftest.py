@@ -177,6 +177,17 @@ def analysis_diagnosis(page, server: Server) -> str:
     return f"page status {shown!r}; API: {status}\nserve.log (end):\n" + "\n".join(log[-60:])
 
 
+def open_done_analysis(server: Server, browser, clip: Path, result: dict, *,
+                       performer: str = "pat", width: int = 1280, height: int = 1000):  # fmt: skip
+    """A finished analysis of ``performer``, its page open in a new context signed in as them:
+    ``(context, page, analysis id)``."""
+    aid = server.add_done_analysis(performer, clip, result)
+    ctx = browser.new_context(viewport={"width": width, "height": height})
+    page = ctx.new_page()
+    sign_in(page, server.url, f"{performer}@example.com", next_path=f"/analyses/{aid}")
+    return ctx, page, aid
+
+
 def sign_in(page, base: str, email: str, password: str = PASSWORD, *, next_path: str = "/"):
     page.goto(f"{base}/login?next={next_path}")
     page.get_by_label("Email").fill(email)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from tests.browser.conftest import COACH, sign_in
+from tests.browser.conftest import COACH, open_done_analysis, sign_in
 
 pytestmark = pytest.mark.browser
 
@@ -37,10 +37,7 @@ def _skeleton_box(rgb: np.ndarray) -> tuple[int, float, float]:
 def test_3d_view_frames_the_body_with_the_panel_collapsed(
     server, browser, clip, clip_result, shots
 ):
-    aid = server.add_done_analysis("pat", clip, clip_result)
-    ctx = browser.new_context(viewport={"width": 1280, "height": 900})
-    page = ctx.new_page()
-    sign_in(page, server.url, "pat@example.com", next_path=f"/analyses/{aid}")
+    ctx, page, _ = open_done_analysis(server, browser, clip, clip_result, height=900)
     page.wait_for_selector("#viewer3d:not([hidden]), #fallback3d:not([hidden])", timeout=30_000)
     if page.locator("#viewer3d").is_hidden():
         pytest.skip(f"no 3D view here: {page.locator('#viewer-status').inner_text()}")

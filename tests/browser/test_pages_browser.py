@@ -13,7 +13,7 @@ import pytest
 from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
 from app.core import media
-from tests.browser.conftest import COACH, analysis_diagnosis, sign_in
+from tests.browser.conftest import COACH, analysis_diagnosis, open_done_analysis, sign_in
 
 pytestmark = pytest.mark.browser
 
@@ -252,10 +252,7 @@ def test_coach_review_comments_persist_and_exports_parse(server, browser, clip, 
 def test_clicking_a_joint_reads_its_bend_for_the_performer_and_the_expert(
     server, browser, clip, clip_result, shots
 ):
-    aid = server.add_done_analysis("pat", clip, clip_result)
-    ctx = browser.new_context(viewport={"width": 1280, "height": 1000})
-    page = ctx.new_page()
-    sign_in(page, server.url, "pat@example.com", next_path=f"/analyses/{aid}")
+    ctx, page, aid = open_done_analysis(server, browser, clip, clip_result)
     wait_results(page)
     page.wait_for_function("() => document.querySelectorAll('#angle-joint option').length > 13")
     knee = clip_result["frames"][0]["joints_2d"][2]  # the left knee, video pixels
