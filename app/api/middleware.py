@@ -113,6 +113,13 @@ class CrossOriginGuard:
                     "cross-origin request refused: send it from this site, or with an API key",
                 ))  # fmt: skip
                 return
+        # A websocket (the 3D view's) carries the session cookie like a state change: one
+        # opened by a page of another site, even a sibling subdomain, is refused (4403)
+        # before the app sees it.
+        if scope["type"] == "websocket" and not self._allowed(Headers(scope=scope), scope):
+            await receive()  # websocket.connect
+            await send({"type": "websocket.close", "code": 4403, "reason": "cross-origin"})
+            return
         await self.app(scope, receive, send)
 
     def _allowed(self, headers: Headers, scope: Scope) -> bool:
@@ -127,6 +134,7 @@ class CrossOriginGuard:
         if origin is None:
             return True
         scheme = scope.get("scheme", "http")
+        scheme = {"ws": "http", "wss": "https"}.get(scheme, scheme)  # a websocket's page
         return origin == f"{scheme}://{headers.get('host', '')}"
 
 
