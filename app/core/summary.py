@@ -139,7 +139,24 @@ def page_summary(analysis: Analysis, result: Result) -> dict[str, Any]:
         "performer": analysis.performer.display_name,
         "bone_labels": list(BONE_LABELS),
         "segments": out,
+        "key_positions": key_positions(out),
     }
+
+
+def key_positions(segments: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """The moments between the reference's segments, named by them: "start of backswing"
+    (with segments named address, backswing, downswing: the top of the backswing) and the
+    last one's end; each with the performer's video frame and the expert's frame."""
+    out = [
+        {"name": f"start of {s['name']}", "frame": s["performer_start"],
+         "reference_frame": s["reference_start"]}
+        for s in segments
+    ]  # fmt: skip
+    if segments:
+        last = segments[-1]
+        out.append({"name": f"end of {last['name']}", "frame": last["performer_end"],
+                    "reference_frame": last["reference_end"]})  # fmt: skip
+    return out
 
 
 def bend_angles(result: Result, reference_joints: np.ndarray) -> dict[str, Any]:

@@ -277,6 +277,22 @@ def test_clicking_a_joint_reads_its_bend_for_the_performer_and_the_expert(
     ctx.close()
 
 
+def test_key_positions_step_through_the_motion(server, browser, clip, clip_result):
+    ctx, page, _ = open_done_analysis(server, browser, clip, clip_result)
+    wait_results(page)
+    segs, first = clip_result["segments"], clip_result["frames"][0]["t"]
+    keys = page.locator("#key-positions button")
+    assert keys.count() == len(segs) + 1
+    names = keys.all_inner_texts()
+    assert all(n.startswith("Start of ") for n in names[:-1]) and names[-1].startswith("End of ")
+    for k, frame in ((1, segs[1]["performer_start"]), (len(segs), segs[-1]["performer_end"])):
+        keys.nth(k).click()
+        page.wait_for_function(
+            f"() => document.getElementById('analysis').dataset.frame === '{frame - first}'"
+        )
+    ctx.close()
+
+
 def test_two_viewers_each_see_their_own_analysis(server, browser, clip, clip_result):
     other = dict(clip_result)
     other["frames"] = [dict(f, bone_errors_deg=[0.0] * 16, posture_error_deg=0.0)

@@ -190,6 +190,10 @@ def test_results_summary_video_and_exports(env):
     # in a coach's words: the bone's label, the tempo as one sentence
     assert summary["segments"][1]["worst_bones"][0][0] == "head"
     assert summary["bone_labels"][9] == "left upper arm" and BONE_NAMES[9] == "l_shoulder->l_elbow"
+    keys = summary["key_positions"]  # between the segments, named by them
+    assert [k["name"] for k in keys] == ["start of segment 1", "start of segment 2",
+                                         "end of segment 2"]  # fmt: skip
+    assert keys[1]["frame"] == summary["segments"][1]["performer_start"]
     assert all("->" not in b for s in summary["segments"] for b in s["misfit_bones"])
     assert summary["segments"][0]["tempo_text"].endswith("than the expert") or summary[
         "segments"][0]["tempo_text"] == "the expert's tempo"  # fmt: skip

@@ -139,7 +139,7 @@
     $("expert-toggle").hidden = !result.frames.every(function (f) { return f.expert_joints_2d; });
     $("side-toggle").hidden = $("expert-toggle").hidden;
     $("side-canvas").width = result.video.width; $("side-canvas").height = result.video.height;
-    buildBonePicks(); buildPlot(); buildSegments(); loadComments(); start3d(); loadAngles();
+    buildBonePicks(); buildPlot(); buildSegments(); buildKeyPositions(); loadComments(); start3d(); loadAngles();
     $("plot").setAttribute("aria-valuemax", String(n - 1));
     setFrame(0, true);
     root.dataset.ready = "true";
@@ -507,6 +507,18 @@
         tb.append(tr);
       });
     }
+  }
+  // Key positions: the moments between the reference's segments ("start of downswing"),
+  // one button each, to step through a motion the way a coach does.
+  function buildKeyPositions() {
+    const box = $("key-positions");
+    box.replaceChildren(coach.el("span", { class: "muted", text: "Key positions:" }));
+    (summary.key_positions || []).forEach(function (k) {
+      box.append(coach.el("button", { type: "button", class: "small key", "data-frame": k.frame,
+        text: k.name.charAt(0).toUpperCase() + k.name.slice(1),
+        onclick: function () { video.pause(); seek(k.frame - first); } }));
+    });
+    box.hidden = !(summary.key_positions || []).length;
   }
   function markSegment() {
     if (!summary) return;
