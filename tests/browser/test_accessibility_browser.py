@@ -33,40 +33,47 @@ def _violations(page) -> list[str]:
 
 @pytest.mark.parametrize("width", [1280, 390])
 def test_pages_have_no_serious_accessibility_violations(server, browser, clip, clip_result,
-                                                        width):  # fmt: skip
+                                                        width, shots):  # fmt: skip
+    """Each page is also kept as a screenshot at this width (``page-<name>-<width>.png``)."""
     aid = server.add_done_analysis("pat", clip, clip_result)
     found: dict[str, list[str]] = {}
+
+    def check(name: str) -> None:
+        found[name] = _violations(page)
+        slug = name.strip("/").replace("/", "-").replace("{id}", "id") or "home"
+        page.screenshot(path=str(shots / f"page-{slug}-{width}.png"), full_page=True)
+
     ctx = browser.new_context(viewport={"width": width, "height": 900})
     page = ctx.new_page()
     page.goto(f"{server.url}/login")
-    found["/login"] = _violations(page)
+    check("/login")
     sign_in(page, server.url, "pat@example.com", next_path="/analyses")
-    found["/analyses"] = _violations(page)
+    check("/analyses")
     page.goto(f"{server.url}/upload")
     page.wait_for_selector(".ref-option")
-    found["/upload"] = _violations(page)
+    check("/upload")
     page.goto(f"{server.url}/analyses/{aid}")
     wait_results(page)
-    found["/analyses/{id}"] = _violations(page)
+    check("/analyses/{id}")
     page.goto(f"{server.url}/captures")
-    found["/captures"] = _violations(page)
+    check("/captures")
     other = server.add_done_analysis("pat", clip, clip_result)
     page.goto(f"{server.url}/performers/{server.performers['pat']}/compare?a={aid}&b={other}")
     page.wait_for_selector("#compare[data-ready=true]", state="attached")
-    found["/performers/{id}/compare"] = _violations(page)
+    check("/performers/{id}/compare")
     ctx.close()
     ctx = browser.new_context(viewport={"width": width, "height": 900})
     page = ctx.new_page()
     sign_in(page, server.url, COACH[0], COACH[1], next_path="/dashboard")
-    found["/dashboard"] = _violations(page)
+    check("/dashboard")
     page.goto(f"{server.url}/analyses/{aid}/review")
     wait_results(page)
-    found["/analyses/{id}/review"] = _violations(page)
+    check("/analyses/{id}/review")
     page.goto(f"{server.url}/references")
     page.wait_for_selector(".ref-card")
-    found["/references"] = _violations(page)
+    check("/references")
     page.goto(f"{server.url}/analyses/{aid}/report")
-    found["/analyses/{id}/report"] = _violations(page)
+    check("/analyses/{id}/report")
     ctx.close()
     bad = [f"{path}: {v}" for path, vs in found.items() for v in vs]
     assert not bad, "\n".join(bad)
