@@ -86,6 +86,16 @@ def test_the_expert_drawn_over_the_video_slow_motion_and_loop(
     assert ghost_pixels() == 0
     page.get_by_role("checkbox", name="Expert").check()
     assert ghost_pixels() > 50
+    # drawn where the engine projects the expert (the engine's own test checks that this
+    # lands on the performer's true joints): the ghost's colour at its hips, knees and head
+    k = int(page.evaluate("document.getElementById('analysis').dataset.frame"))
+    for j in (0, 2, 5, 16):
+        u, v = clip_result["frames"][k]["expert_joints_2d"][j]
+        px = page.evaluate(
+            "([u, v]) => Array.from(document.getElementById('overlay').getContext('2d')"
+            ".getImageData(Math.round(u), Math.round(v), 1, 1).data)", [u, v],
+        )  # fmt: skip
+        assert np.abs(np.asarray(px[:3]) - [110, 130, 200]).max() <= 40, (j, px)
     assert page.locator("#legend-expert").is_visible()
     page.screenshot(path=str(shots / "analysis-expert-ghost.png"), full_page=True)
     page.get_by_label("Playback speed").select_option("0.25")
