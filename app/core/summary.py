@@ -174,8 +174,9 @@ def bend_angles(result: Result, reference_joints: np.ndarray) -> dict[str, Any]:
     """
     ref = np.asarray(reference_joints, float)
     frames = np.clip([f.reference_frame for f in result.frames], 0, len(ref) - 1)
-    perf = joint_angles_deg(result.joints_3d) if result.frames else np.zeros((0, 13))
-    expert = joint_angles_deg(ref[frames]) if result.frames else np.zeros((0, 13))
+    none = np.zeros((0, len(JOINT_ANGLES)))
+    perf = joint_angles_deg(result.joints_3d) if result.frames else none
+    expert = joint_angles_deg(ref[frames]) if result.frames else none
     return {
         "bends": [{"label": BEND_LABELS[b], "joint": int(BONE_PARENT[b])}
                   for _, _, b in JOINT_ANGLES],

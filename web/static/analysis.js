@@ -19,6 +19,7 @@
   const PALETTE = ["#1971c2", "#9c36b5", "#e67700", "#0c8599", "#5f3dc4", "#d6336c", "#2f9e44", "#495057"];
   const MISFIT = "#fab005";
   const EXPERT_GHOST = "rgba(110,130,200,0.85)";  // the expert in the video, as in the 3D view  // shading of frames the video does not confirm (image_misfit)
+  function capital(t) { return t.charAt(0).toUpperCase() + t.slice(1); }
   // Degrees for people: one decimal under 10 (a segment at 0.4 deg is not "0 deg").
   function deg(v) { return (Math.abs(v) < 9.95 ? v.toFixed(1) : v.toFixed(0)) + "°"; }
 
@@ -419,7 +420,7 @@
     try { angles = await coach.api(base + "/angles"); } catch (e) { return; }
     const sel = $("angle-joint");
     angles.bends.forEach(function (b, k) {
-      sel.append(coach.el("option", { value: String(k), text: b.label.charAt(0).toUpperCase() + b.label.slice(1) }));
+      sel.append(coach.el("option", { value: String(k), text: capital(b.label) }));
     });
   }
   function angleBend() {
@@ -515,7 +516,7 @@
     box.replaceChildren(coach.el("span", { class: "muted", text: "Key positions:" }));
     (summary.key_positions || []).forEach(function (k) {
       box.append(coach.el("button", { type: "button", class: "small key", "data-frame": k.frame,
-        text: k.name.charAt(0).toUpperCase() + k.name.slice(1),
+        text: capital(k.name),
         onclick: function () { video.pause(); seek(k.frame - first); } }));
     });
     box.hidden = !(summary.key_positions || []).length;

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import re
 
 import httpx
 import websockets
@@ -51,8 +52,6 @@ def viewer_path(analysis_id: str) -> str:
 
 def _port_for(request: Request | WebSocket, analysis_id: str, tab: str) -> int:
     """The analysis' viser port, if the caller is signed in, may see it, and its viewer runs."""
-    import re
-
     if not re.match(TAB_PATTERN, tab):
         raise ApiError(404, "not_found", "no 3D view here")
     db = request.app.state.sessionmaker()
