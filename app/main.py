@@ -30,7 +30,7 @@ from app.core import recovery
 from app.core.config import Settings, get_settings
 from app.core.db import make_engine, make_sessionmaker, run_migrations
 from app.core.queue import get_queue
-from app.core.ratelimit import RateLimiter, SignInThrottle
+from app.core.ratelimit import limits_for
 from app.core.reflect import Notifier, Reflector
 from app.core.security import stored_secret
 from app.core.storage import Storage
@@ -76,13 +76,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.sessionmaker = sessions
     app.state.storage = storage
     app.state.notifier = notifier
-    app.state.rate_limiter = RateLimiter(settings.rate_limit_per_s, settings.rate_limit_burst)
-    app.state.signin_throttle = SignInThrottle(
-        free_per_account=settings.signin_free_per_account,
-        free_per_ip=settings.signin_free_per_ip,
-        backoff_s=settings.signin_backoff_s,
-        max_lock_s=settings.signin_max_lock_s,
-    )
+    app.state.rate_limiter, app.state.signin_throttle = limits_for(settings)
 
     errors.install(app)
     app.include_router(api_router, prefix=API_PREFIX)

@@ -64,6 +64,10 @@ class Settings(BaseSettings):
     # Per-key rate limit (token bucket): sustained requests per second and burst size.
     rate_limit_per_s: float = Field(default=5.0, gt=0)
     rate_limit_burst: int = Field(default=60, ge=1)
+    #: Redis URL where every API process keeps the rate limits and sign-in throttles, so N
+    #: processes do not give an attacker N times the attempts. Empty: the broker's URL when
+    #: it is Redis, else each process keeps its own in memory (``coach serve``: one process).
+    limits_url: str = ""
 
     # Progress reflection and server-sent events.
     sse_poll_s: float = Field(default=0.5, gt=0)
@@ -92,6 +96,12 @@ class Settings(BaseSettings):
     signin_free_per_ip: int = Field(default=20, ge=1)
     signin_backoff_s: float = Field(default=1.0, gt=0)
     signin_max_lock_s: float = Field(default=900.0, gt=0)
+
+    @property
+    def shared_limits_url(self) -> str | None:
+        """Where the limits are shared (app.core.ratelimit), None for in-process ones."""
+        url = self.limits_url or self.broker_url
+        return url if url.startswith(("redis://", "rediss://", "unix://")) else None
 
     @property
     def sqlalchemy_url(self) -> str:

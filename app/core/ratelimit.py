@@ -1,13 +1,22 @@
-"""Per-key token buckets.
+"""Per-key token buckets and the sign-in throttle.
 
-In memory, per API process: with several API processes each allows the full rate, which is
-acceptable for abuse protection; a shared limit would need Redis.
+In memory for one API process (``coach serve``). With several API processes, the Redis
+variants keep the same counts in Redis, so N processes do not give an attacker N times the
+attempts (issue 26). They read Redis' clock, not the processes' own, and fall back to the
+in-memory counts while Redis cannot be reached: limits then hold per process, as before,
+rather than locking everybody out or letting everybody in.
 """
 
 from __future__ import annotations
 
+import hashlib
+import logging
+import math
 import threading
 import time
+from typing import Any
+
+log = logging.getLogger("app.ratelimit")
 
 
 class RateLimiter:
@@ -86,3 +95,151 @@ class SignInThrottle:
             by_age = sorted(self._entries, key=lambda k: self._entries[k][1])
             for k in by_age[: len(by_age) // 2]:
                 del self._entries[k]
+
+
+# ---- shared in Redis
+# Lua: each call is atomic in Redis, and TIME is Redis' clock (the same for every API process).
+_NOW = """
+if redis.replicate_commands then redis.replicate_commands() end
+local t = redis.call('TIME')
+local now = tonumber(t[1]) + tonumber(t[2]) / 1e6
+"""
+_TAKE = _NOW + """
+local rate, burst = tonumber(ARGV[1]), tonumber(ARGV[2])
+local b = redis.call('HMGET', KEYS[1], 'tokens', 'last')
+local tokens, last = tonumber(b[1]) or burst, tonumber(b[2]) or now
+tokens = math.min(burst, tokens + math.max(0, now - last) * rate)
+local wait = 0
+if tokens >= 1 then tokens = tokens - 1 else wait = (1 - tokens) / rate end
+redis.call('HSET', KEYS[1], 'tokens', tostring(tokens), 'last', tostring(now))
+redis.call('EXPIRE', KEYS[1], math.ceil(burst / rate) + 1)
+return tostring(wait)
+"""
+_WAIT = _NOW + """
+local wait = 0
+for i, key in ipairs(KEYS) do
+  local untl = tonumber(redis.call('HGET', key, 'until')) or 0
+  wait = math.max(wait, untl - now)
+end
+return tostring(wait)
+"""
+# ARGV: backoff_s, max_lock_s, then the free failures of each key.
+_FAILED = _NOW + """
+local backoff, max_lock = tonumber(ARGV[1]), tonumber(ARGV[2])
+for i, key in ipairs(KEYS) do
+  local n = redis.call('HINCRBY', key, 'n', 1)
+  local over = n - tonumber(ARGV[2 + i])
+  local lock = 0
+  if over >= 0 then
+    lock = math.min(max_lock, backoff * 2 ^ over)
+    redis.call('HSET', key, 'until', tostring(now + lock))
+  end
+  -- forgotten max_lock_s after its last failure, once any lock is over
+  redis.call('EXPIRE', key, math.ceil(lock + max_lock))
+end
+return 0
+"""
+
+
+def _redis_client(url: str) -> Any:
+    import redis
+
+    # Short timeouts: a sign-in must not hang on a slow Redis; the fallback answers then.
+    return redis.Redis.from_url(url, socket_timeout=0.5, socket_connect_timeout=0.5)
+
+
+class _Fallback:
+    """Logs Redis failures at most once a minute; the caller then uses its in-memory counts."""
+
+    def __init__(self) -> None:
+        self._last_warning = -math.inf
+
+    def warn(self, exc: Exception) -> None:
+        now = time.monotonic()
+        if now - self._last_warning > 60:
+            self._last_warning = now
+            log.warning("limits kept per process while Redis is unreachable: %s", exc)
+
+
+class RedisRateLimiter(RateLimiter):
+    """:class:`RateLimiter` whose buckets live in Redis, shared by every API process."""
+
+    def __init__(self, url: str, rate_per_s: float, burst: int, prefix: str = "coach:rl:") -> None:
+        super().__init__(rate_per_s, burst)
+        self.prefix, self._redis, self._fallback = prefix, _redis_client(url), _Fallback()
+        self._take = self._redis.register_script(_TAKE)
+
+    def take(self, key: object) -> float:
+        import redis
+
+        try:
+            return float(self._take(keys=[f"{self.prefix}{key}"], args=[self.rate, self.burst]))
+        except redis.RedisError as exc:
+            self._fallback.warn(exc)
+            return super().take(key)
+
+
+class RedisSignInThrottle(SignInThrottle):
+    """:class:`SignInThrottle` whose counts live in Redis, shared by every API process.
+
+    Keys are hashed, so Redis holds no email address; each expires ``max_lock_s`` after its
+    last failure once its lock is over, which bounds what random emails can fill.
+    """
+
+    def __init__(self, url: str, *, prefix: str = "coach:signin:", **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self.prefix, self._redis, self._fallback = prefix, _redis_client(url), _Fallback()
+        self._wait = self._redis.register_script(_WAIT)
+        self._failed = self._redis.register_script(_FAILED)
+
+    def _name(self, key: tuple[str, str]) -> str:
+        return self.prefix + hashlib.sha256("\0".join(key).encode()).hexdigest()[:32]
+
+    def wait(self, keys: list[tuple[str, str]]) -> float:
+        import redis
+
+        try:
+            return float(self._wait(keys=[self._name(k) for k in keys]))
+        except redis.RedisError as exc:
+            self._fallback.warn(exc)
+            return super().wait(keys)
+
+    def failed(self, keys: list[tuple[str, str]]) -> None:
+        import redis
+
+        args = [self.backoff_s, self.max_lock_s, *(self.free[k[0]] for k in keys)]
+        try:
+            self._failed(keys=[self._name(k) for k in keys], args=args)
+        except redis.RedisError as exc:
+            self._fallback.warn(exc)
+            super().failed(keys)
+
+    def succeeded(self, email: str) -> None:
+        import redis
+
+        try:
+            self._redis.delete(self._name(self.keys(email, "")[0]))
+        except redis.RedisError as exc:
+            self._fallback.warn(exc)
+        super().succeeded(email)
+
+
+def limits_for(settings: Any) -> tuple[RateLimiter, SignInThrottle]:
+    """The API key buckets and the sign-in throttle for ``settings`` (app.core.config):
+    shared in Redis when ``settings.shared_limits_url`` names one, else in memory."""
+    throttle = {
+        "free_per_account": settings.signin_free_per_account,
+        "free_per_ip": settings.signin_free_per_ip,
+        "backoff_s": settings.signin_backoff_s,
+        "max_lock_s": settings.signin_max_lock_s,
+    }
+    url = settings.shared_limits_url
+    if url is None:
+        return (
+            RateLimiter(settings.rate_limit_per_s, settings.rate_limit_burst),
+            SignInThrottle(**throttle),
+        )
+    return (
+        RedisRateLimiter(url, settings.rate_limit_per_s, settings.rate_limit_burst),
+        RedisSignInThrottle(url, **throttle),
+    )
