@@ -30,6 +30,36 @@ PROGRESS_STATE = "PROGRESS"
 
 STATES = ("queued", "running", "done", "failed", "cancelled")
 
+#: The probe file :func:`storage_now` touches in a folder.
+CLOCK_FILE = "clock"
+
+
+def storage_now(folder: str | os.PathLike) -> float | None:
+    """Now on the clock of the storage that holds ``folder``: the modification time it gives
+    a file touched now (on NFS, ``utime(None)`` sets the server's time). The ages of files
+    that other machines write are measured against it, so that API and workers need no
+    synchronised clocks. None if the folder is gone or read-only.
+    """
+    probe = Path(folder) / CLOCK_FILE
+    try:
+        probe.touch()
+        return probe.stat().st_mtime
+    except OSError:
+        return None
+
+
+def file_age_s(path: str | os.PathLike, now: float | None = None) -> float | None:
+    """Seconds since ``path`` was last modified, by the storage's clock (``now``: a reading
+    of :func:`storage_now` for its folder); None if the file is absent."""
+    path = Path(path)
+    try:
+        modified = path.stat().st_mtime
+    except OSError:
+        return None
+    if now is None:
+        now = storage_now(path.parent)
+    return (time.time() if now is None else now) - modified
+
 
 @dataclass(frozen=True)
 class AnalysisJob:
@@ -95,6 +125,7 @@ class AnalysisFolder:
         heartbeat        {"owner": entry task id, "host", "pid"}; its modification time is
                          renewed every few seconds while any task of the analysis runs (the
                          lease: older than ``lost_after_s`` means nobody runs it)
+        clock            touched to read the storage's clock (:func:`storage_now`)
         stages/          one output per finished engine stage (a stage whose output exists
                          is skipped):
             prepare.npz                  stages 0-2
@@ -130,13 +161,14 @@ class AnalysisFolder:
         return self.work_dir / "attempts" / output.stem
 
     def heartbeat_age_s(self, now: float | None = None) -> float | None:
-        """Seconds since a task of the analysis last renewed its heartbeat; None if no task
-        ever ran. Negative while a retry countdown holds the lease into the future."""
-        try:
-            renewed = self.heartbeat.stat().st_mtime
-        except OSError:
-            return None
-        return (time.time() if now is None else now) - renewed
+        """Seconds since a task of the analysis last renewed its heartbeat, by the storage's
+        clock (``now``: a reading of :meth:`storage_now`); None if no task ever ran.
+        Negative while a retry countdown holds the lease into the future."""
+        return file_age_s(self.heartbeat, now)
+
+    def storage_now(self) -> float | None:
+        """:func:`storage_now` for this folder."""
+        return storage_now(self.work_dir)
 
     def chunks(self, n_chunks: int) -> list[Path]:
         return [self.chunk(i, n_chunks) for i in range(n_chunks)]

@@ -8,7 +8,9 @@ SIGKILLed worker's message waits out the visibility timeout, 2 h by default), an
   ``heartbeat`` file every ``heartbeat_s``. One older than ``lost_after_s`` means nobody does:
   the API's recovery (``app.core.recovery``) then queues the analysis again, and it resumes
   from its last finished stage. So re-queueing is always safe, the entry task drops a message
-  for an analysis another entry task is running (:func:`running_elsewhere`).
+  for an analysis another entry task is running (:func:`running_elsewhere`). The heartbeat's
+  time is set and read on the storage's clock (``worker.contract.storage_now``), never a
+  machine's own, so the lease holds between machines whose clocks differ.
 - *Does a stage kill its worker?* :func:`attempt` counts the runs of a stage that started and
   never came back (the process was OOM-killed or crashed: no Python code ran to say so). At
   ``max_crashes`` the stage fails with :class:`RepeatedCrash` instead of running again, so a
@@ -24,7 +26,6 @@ import os
 import signal
 import socket
 import threading
-import time
 import uuid
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -63,9 +64,14 @@ def _write_atomic(path: Path, text: str) -> None:
     os.replace(tmp, path)
 
 
-def _touch(path: Path, when: float | None = None) -> None:
+def _touch(path: Path, ahead_s: float = 0.0) -> None:
+    """Renew ``path``'s modification time to the storage's now (plus ``ahead_s``): the
+    storage's clock, not this machine's, which may differ from the API's."""
     try:
-        os.utime(path, None if when is None else (when, when))
+        os.utime(path, None)
+        if ahead_s:
+            when = path.stat().st_mtime + ahead_s
+            os.utime(path, (when, when))
     except OSError:
         pass  # the folder was removed (analysis deleted): nothing left to keep alive
 
@@ -105,7 +111,7 @@ class Heartbeat:
     def __exit__(self, *exc_info: object) -> None:
         self._stop.set()
         self._thread.join()
-        _touch(self.path, time.time() + self.hold_s)
+        _touch(self.path, self.hold_s)
 
 
 def running_elsewhere(work_dir: str | os.PathLike, owner: str, lost_after_s: float) -> bool:

@@ -34,13 +34,17 @@ Queueing again is always safe: stages whose output exists are skipped, and a wor
 entry message for an analysis whose heartbeat another run keeps fresh. The row's
 ``recoveries`` counter is the claim: a conditional update (``WHERE recoveries = n``) lets one
 API process of several do it.
+
+Clocks: file ages are read on the storage's clock (``worker.contract.storage_now``: the
+folder's ``clock`` file touched, its time read back), row times on the API's. So a worker or
+an API machine whose clock is off neither recovers a live analysis nor leaves a dead one.
 """
 
 from __future__ import annotations
 
 import logging
-import os
 import time
+from dataclasses import dataclass
 from datetime import datetime
 
 from sqlalchemy import update
@@ -51,7 +55,7 @@ from app.core.config import Settings
 from app.core.queue import JobQueue, QueueUnavailable, analysis_job
 from app.core.storage import Storage
 from app.models import TERMINAL_STATES, Analysis, Reference, utcnow
-from worker.contract import AnalysisFolder, BrokerTasks
+from worker.contract import AnalysisFolder, BrokerTasks, file_age_s
 
 log = logging.getLogger("app.recovery")
 
@@ -59,18 +63,27 @@ log = logging.getLogger("app.recovery")
 RECHECK_S = 0.2
 
 
-def _mtime(path: os.PathLike) -> float:
-    try:
-        return os.stat(path).st_mtime
-    except OSError:
-        return 0.0
-
-
 def _timestamp(value: datetime | None) -> float:
     return value.timestamp() if value is not None else 0.0
 
 
-def quiet_s(analysis: Analysis, now: float) -> float | None:
+@dataclass(frozen=True)
+class Clocks:
+    """The two clocks an analysis' signs of life are read on: ``api`` for the database row
+    (API processes write its times) and ``storage`` for the folder's files (workers write
+    them, and the storage stamps them), so API and workers need no synchronised clocks."""
+
+    api: float
+    storage: float
+
+    @classmethod
+    def read(cls, analysis: Analysis, api_now: float) -> Clocks:
+        storage = AnalysisFolder(analysis.work_dir).storage_now()
+        # No folder (deleted or not yet written): no file to age, any reading will do.
+        return cls(api_now, api_now if storage is None else storage)
+
+
+def quiet_s(analysis: Analysis, clocks: Clocks) -> float | None:
     """Seconds since the analysis last showed life; None if it is finished in its folder
     (done, failed, cancelled: the reflector records that, nothing to recover)."""
     folder = AnalysisFolder(analysis.work_dir)
@@ -78,13 +91,10 @@ def quiet_s(analysis: Analysis, now: float) -> float | None:
         return None
     if (Storage.read_json(folder.status) or {}).get("state") in TERMINAL_STATES:
         return None
-    last = max(
-        _mtime(folder.heartbeat),
-        _mtime(folder.status),
-        _timestamp(analysis.created_at),
-        _timestamp(analysis.updated_at),
-    )
-    return now - last
+    ages = [file_age_s(p, clocks.storage) for p in (folder.heartbeat, folder.status)]
+    ages += [clocks.api - _timestamp(analysis.created_at)]
+    ages += [clocks.api - _timestamp(analysis.updated_at)]
+    return min(a for a in ages if a is not None)
 
 
 def task_ids(analysis: Analysis) -> set[str]:
@@ -98,11 +108,13 @@ def task_ids(analysis: Analysis) -> set[str]:
 def lost_cause(
     analysis: Analysis, broker: BrokerTasks, settings: Settings, now: float
 ) -> str | None:
-    """Why nobody works on the analysis, or None while somebody may."""
-    quiet = quiet_s(analysis, now)
+    """Why nobody works on the analysis, or None while somebody may (``now``: this API
+    process' clock)."""
+    clocks = Clocks.read(analysis, now)
+    quiet = quiet_s(analysis, clocks)
     if quiet is None or quiet < settings.publish_grace_s:
         return None
-    heartbeat = AnalysisFolder(analysis.work_dir).heartbeat_age_s(now)
+    heartbeat = AnalysisFolder(analysis.work_dir).heartbeat_age_s(clocks.storage)
     if heartbeat is not None and heartbeat < settings.lost_after_s:
         return None  # a live run, or one that ended moments ago and left its next message
     ids = task_ids(analysis)
@@ -110,7 +122,9 @@ def lost_cause(
         return None  # waits for a free worker
     held = broker.held is None or bool(ids & broker.held)
     # A worker that took a message moments ago is alive, though its task has not started
-    # the heartbeat yet (the message may have waited long for a free worker).
+    # the heartbeat yet (the message may have waited long for a free worker). The broker
+    # records the worker's clock: a skew shifts only this short sign, bounded by the heartbeat
+    # that the task starts at once.
     taken = max((broker.taken_at.get(i, 0.0) for i in ids), default=0.0)
     if held and min(quiet, now - taken) < settings.lost_after_s:
         # A worker took it (or the transport cannot say): only a stale heartbeat proves that
@@ -130,7 +144,7 @@ def recover(
     now = time.time() if now is None else now
     suspects = [
         a for a in crud.list_active_analyses(session)
-        if (q := quiet_s(a, now)) is not None and q >= settings.publish_grace_s
+        if (q := quiet_s(a, Clocks.read(a, now))) is not None and q >= settings.publish_grace_s
     ]  # fmt: skip
     if not suspects:
         return []

@@ -4,6 +4,7 @@ Layout under ``data_dir``::
 
     coach.db                  SQLite database (default)
     secret_key                the session secret, generated at first start (mode 0600)
+    clock                     touched to read the storage's clock (worker.contract.storage_now)
     tmp/<random>/             uploads being received and checked; removed on failure, and
                               at start when left by a process that died mid-upload
     references/<id>/          reference.bvh
@@ -24,6 +25,8 @@ import uuid
 from pathlib import Path
 
 from fastapi import UploadFile
+
+from worker.contract import storage_now
 
 CHUNK_BYTES = 1024 * 1024
 VIDEO_SUFFIXES = (".mp4", ".mov", ".m4v", ".webm", ".avi", ".mkv")
@@ -48,7 +51,8 @@ class Storage:
         Only those untouched for ``older_than_s``: other API processes sharing this data
         directory may be receiving theirs right now. Returns how many were removed.
         """
-        cutoff = time.time() - older_than_s
+        # The storage's clock, as other processes' files are stamped by it.
+        cutoff = (storage_now(self.root) or time.time()) - older_than_s
         stale = [p for p in (self.root / "tmp").iterdir() if p.stat().st_mtime < cutoff]
         for path in stale:
             self.remove(path)

@@ -11,6 +11,7 @@ import os
 import time
 from dataclasses import dataclass, field
 from datetime import UTC, datetime, timedelta
+from pathlib import Path
 
 import pytest
 
@@ -54,6 +55,20 @@ def _analysis(tmp_path, *, task_id: str | None = "t1", age_s: float = 100.0) -> 
 def _age(path, seconds: float) -> None:
     path.touch()
     os.utime(path, (time.time() - seconds,) * 2)
+
+
+def _elapse(app, seconds: float) -> None:
+    """As if ``seconds`` passed with nobody working: every analysis' row times and files
+    made that much older (a future ``now`` would not do: recovery reads the files' ages on
+    the storage's clock, not on the API's)."""
+    with app.state.sessionmaker() as session:
+        for analysis in session.query(Analysis):
+            analysis.created_at -= timedelta(seconds=seconds)
+            analysis.updated_at -= timedelta(seconds=seconds)
+            for path in Path(analysis.work_dir).rglob("*"):
+                mtime = path.stat().st_mtime - seconds
+                os.utime(path, (mtime, mtime))
+        session.commit()
 
 
 @pytest.mark.parametrize(
@@ -110,18 +125,19 @@ def test_a_message_caught_between_queue_and_worker_is_not_lost(
     them sees it nowhere. Recovery reads the broker again before it queues anything."""
     monkeypatch.setattr(recovery, "RECHECK_S", 0.0)
     upload(client, club_ref, video_file)
-    later = time.time() + settings.lost_after_s + 1
+    _elapse(app, settings.lost_after_s + 1)
     readings = [BrokerTasks(frozenset(), frozenset())]  # the message in transit
 
     class InTransit(BrokerQueue):
         def broker_tasks(self) -> BrokerTasks:
             if readings:
                 return readings.pop()
-            return BrokerTasks(frozenset(), frozenset({"task-1"}), taken_at={"task-1": later - 1})
+            just = time.time() - 1
+            return BrokerTasks(frozenset(), frozenset({"task-1"}), taken_at={"task-1": just})
 
     with app.state.sessionmaker() as session:
-        assert recovery.recover(session, settings=settings, queue=InTransit(), now=later) == []
-        assert recovery.recover(session, settings=settings, queue=BrokerQueue(), now=later) != []
+        assert recovery.recover(session, settings=settings, queue=InTransit()) == []
+        assert recovery.recover(session, settings=settings, queue=BrokerQueue()) != []
 
 
 @pytest.mark.parametrize("finished", ["result", "cancel", "status"])
@@ -153,11 +169,12 @@ def test_publish_failure_keeps_the_row_and_recovery_publishes_it(
     assert r.status_code == 201, r.text
     analysis_id = r.json()["id"]
     queue = BrokerQueue()
-    later = time.time() + settings.publish_grace_s + 1
     with app.state.sessionmaker() as session:
         assert session.get(Analysis, analysis_id).task_id is None
-        assert recovery.recover(session, settings=settings, queue=queue, now=time.time()) == []
-        assert recovery.recover(session, settings=settings, queue=queue, now=later) == [analysis_id]
+        assert recovery.recover(session, settings=settings, queue=queue) == []
+    _elapse(app, settings.publish_grace_s + 1)
+    with app.state.sessionmaker() as session:
+        assert recovery.recover(session, settings=settings, queue=queue) == [analysis_id]
         row = session.get(Analysis, analysis_id)
         assert row.task_id == "recovered-1" and row.recoveries == 1
     assert [j.analysis_id for j in queue.jobs] == [analysis_id]
@@ -174,7 +191,8 @@ def test_no_worker_package_is_still_a_503(app, client, club_ref, video_file, set
 def test_two_api_processes_recover_an_analysis_once(app, client, club_ref, video_file, settings):
     upload(client, club_ref, video_file)  # queued as task-1, which the broker then forgot
     queue = BrokerQueue()
-    later = time.time() + settings.lost_after_s + 1
+    _elapse(app, settings.lost_after_s + 1)
+    later = time.time()
     first, second = app.state.sessionmaker(), app.state.sessionmaker()
     with first, second:
         # Both find it lost before either acts; the claim lets one through.
@@ -184,5 +202,34 @@ def test_two_api_processes_recover_an_analysis_once(app, client, club_ref, video
         assert recovery._requeue(first, settings, queue, rows[0], "message lost")
         assert not recovery._requeue(second, settings, queue, rows[1], "message lost")
         # The next tick of either sees the new message waiting.
-        assert recovery.recover(second, settings=settings, queue=queue, now=later) == []
+        assert recovery.recover(second, settings=settings, queue=queue) == []
     assert len(queue.jobs) == 1 and rows[0].recoveries == 1
+
+
+# ---- clocks that differ (issue 26: recovery depended on synchronised clocks)
+@pytest.mark.parametrize("api_clock_off_s", [-600.0, 0.0, 600.0])
+def test_a_wrong_api_clock_neither_recovers_a_live_run_nor_keeps_a_dead_one(
+    tmp_path, settings, api_clock_off_s
+):
+    """The API's clock is 10 min off the workers' and the storage's: a heartbeat renewed
+    just now is still a live run, one renewed 100 s ago still a lost one."""
+    api_now = time.time() + api_clock_off_s
+    analysis = _analysis(tmp_path)
+    analysis.created_at = analysis.updated_at = datetime.fromtimestamp(api_now - 100, UTC)
+    folder = AnalysisFolder(analysis.work_dir)
+    gone = BrokerTasks(frozenset(), frozenset())
+    _age(folder.heartbeat, 0)
+    assert recovery.lost_cause(analysis, gone, settings, api_now) is None
+    _age(folder.heartbeat, settings.lost_after_s + 40)
+    assert recovery.lost_cause(analysis, gone, settings, api_now) == "message lost"
+
+
+def test_old_uploads_are_told_by_the_storage_clock(tmp_path, monkeypatch):
+    from app.core.storage import Storage
+
+    storage = Storage(tmp_path / "data")
+    fresh, old = storage.new_tmp_dir(), storage.new_tmp_dir()
+    _age(old, 7200)
+    monkeypatch.setattr(time, "time", lambda: os.stat(fresh).st_mtime + 7200)  # 2 h ahead
+    assert storage.clean_tmp(3600) == 1
+    assert fresh.exists() and not old.exists()

@@ -112,6 +112,18 @@ def test_a_second_entry_message_for_a_live_run_is_a_duplicate(tmp_path):
     assert not lease.running_elsewhere(tmp_path / "never-ran", "root-2", lost_after_s=60)
 
 
+@pytest.mark.parametrize("clock_off_s", [-600.0, 600.0])
+def test_the_lease_holds_on_a_worker_whose_clock_is_off(tmp_path, monkeypatch, clock_off_s):
+    """The lease is set and read on the storage's clock: a worker 10 min off still sees a
+    live run as live, and still holds the lease through a retry's countdown."""
+    real = time.time
+    monkeypatch.setattr(time, "time", lambda: real() + clock_off_s)
+    with lease.Heartbeat(tmp_path, "root-1", every_s=1) as heartbeat:
+        assert lease.running_elsewhere(tmp_path, "root-2", lost_after_s=60)
+        heartbeat.hold(30)
+    assert -31 < AnalysisFolder(tmp_path).heartbeat_age_s() < -29
+
+
 def test_repeated_crash_fails_the_analysis_and_stops_its_other_messages(job):
     jobs.run_prepare(job, pipeline=fake_pipeline)
     paths = AnalysisFolder(job.work_dir)
