@@ -131,7 +131,9 @@ class AnalysisFolder:
             prepare.npz                  stages 0-2
             candidates-<i>-of-<n>.npz    stage 3, chunk i of n
         attempts/        per stage output, how many started runs never came back (the
-                         worker process died): ``attempts/<output stem>``, a count
+                         worker process died): ``attempts/<output stem>``, "count runner"
+        stopping/        ``stopping/<runner>``: that pool process' worker was told to stop
+                         while it ran a stage here (``worker.lease.note_stopping``)
 
     Writers write to a temporary name holding ``.tmp`` and rename (:func:`is_temporary`).
     """
@@ -159,6 +161,10 @@ class AnalysisFolder:
     def attempts(self, output: Path) -> Path:
         """The crash count of the stage that writes ``output`` (one of the paths above)."""
         return self.work_dir / "attempts" / output.stem
+
+    def stopping(self, runner: str) -> Path:
+        """The notice that ``runner`` (``worker.lease.runner_id``) was told to stop."""
+        return self.work_dir / "stopping" / runner
 
     def heartbeat_age_s(self, now: float | None = None) -> float | None:
         """Seconds since a task of the analysis last renewed its heartbeat, by the storage's

@@ -16,12 +16,14 @@ SIGKILLed worker's message waits out the visibility timeout, 2 h by default), an
   ``max_crashes`` the stage fails with :class:`RepeatedCrash` instead of running again, so a
   poison job stops instead of taking down worker after worker. A run that ends any way Python
   sees does not count: a result, an error, a retry, or SIGTERM, which is how Celery cancels a
-  task when it loses the broker (:func:`interrupt_on_sigterm`).
+  task when it loses the broker (:func:`interrupt_on_sigterm`). Nor does a run SIGKILLed
+  after its worker was told to stop (a deploy: :func:`note_stopping`).
 """
 
 from __future__ import annotations
 
 import json
+import logging
 import os
 import signal
 import socket
@@ -33,6 +35,8 @@ from pathlib import Path
 from types import FrameType
 
 from worker.contract import AnalysisFolder
+
+log = logging.getLogger("worker.lease")
 
 
 class RepeatedCrash(Exception):
@@ -127,27 +131,67 @@ def running_elsewhere(work_dir: str | os.PathLike, owner: str, lost_after_s: flo
         return False  # unreadable: run it; a duplicate run is safe, a dropped one is not
 
 
-def _read_count(path: Path) -> int:
+def runner_id(pid: int | None = None) -> str:
+    """Who runs a stage: this machine and the pool process ``pid`` (default: this one). A
+    worker's master names its pool processes the same way (:func:`note_stopping`)."""
+    return f"{socket.gethostname()}-{os.getpid() if pid is None else pid}"
+
+
+def note_stopping(work_dir: str | os.PathLike, pid: int) -> None:
+    """Record that the worker running a stage of the analysis in pool process ``pid`` was
+    told to stop (a deploy's SIGTERM to its master). A deploy SIGKILLs what has not finished
+    after its grace period (docker: 10 s): :func:`attempt` then does not count that run as
+    one that killed its worker."""
     try:
-        return int(path.read_text().strip() or 0)
+        _write_atomic(AnalysisFolder(work_dir).stopping(runner_id(pid)), "")
+    except OSError:
+        pass  # the folder was removed: nothing will run again
+
+
+def _read_ledger(path: Path) -> tuple[int, str]:
+    """A crash ledger: how many runs started and never came back, and who ran the last."""
+    try:
+        count, _, runner = path.read_text().strip().partition(" ")
+        return int(count or 0), runner
     except (OSError, ValueError):
-        return 0
+        return 0, ""
+
+
+def _stopped_by_deploy(folder: AnalysisFolder, ledger: Path, runner: str) -> bool:
+    """Whether the last run in ``ledger`` was told to stop after it started: then its death
+    was the deploy's SIGKILL, not the stage's doing. Consumes the notice."""
+    notice = folder.stopping(runner)
+    try:
+        told_after_start = notice.stat().st_mtime >= ledger.stat().st_mtime
+        notice.unlink()
+    except OSError:
+        return False
+    return told_after_start
 
 
 @contextmanager
 def attempt(work_dir: str | os.PathLike, output: Path, *, max_crashes: int) -> Iterator[None]:
     """Count one run of the stage that writes ``output`` until the body returns or raises.
 
+    A run that never came back counts as a crash, unless its worker was told to stop while
+    it ran (:func:`note_stopping`): a deploy's SIGKILL looks the same as the OOM killer's, only
+    the SIGTERM before it tells them apart.
+
     Raises
     ------
     RepeatedCrash
         ``max_crashes`` earlier runs of the stage started and never came back.
     """
-    ledger = AnalysisFolder(work_dir).attempts(output)
-    crashes = _read_count(ledger)
+    folder = AnalysisFolder(work_dir)
+    ledger = folder.attempts(output)
+    crashes, runner = _read_ledger(ledger)
+    if crashes and runner and _stopped_by_deploy(folder, ledger, runner):
+        log.warning("stage run cut short by a worker shutdown, not counted as a crash: %s",
+                    output.name)  # fmt: skip
+        crashes -= 1
     if crashes >= max_crashes:
         raise RepeatedCrash.after(crashes)
-    _write_atomic(ledger, str(crashes + 1))
+    _write_atomic(ledger, f"{crashes + 1} {runner_id()}")
     try:
         yield
     finally:

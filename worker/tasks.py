@@ -31,7 +31,7 @@ from types import ModuleType
 
 from celery import chain, chord, group
 from celery.exceptions import Retry, SoftTimeLimitExceeded
-from celery.signals import worker_process_init
+from celery.signals import worker_process_init, worker_shutting_down
 from kombu.exceptions import OperationalError
 
 from engine import pipeline as engine_pipeline
@@ -80,6 +80,19 @@ def _on_pool_process_start(**_: object) -> None:
     # Celery cancels running tasks with SIGTERM when it loses the broker: let them unwind so
     # the cut-short stage is not counted as one that killed its worker.
     lease.interrupt_on_sigterm()
+
+
+@worker_shutting_down.connect
+def _on_worker_shutting_down(**_: object) -> None:
+    """In the worker's master, told to stop (a deploy's SIGTERM): note which pool processes
+    run a stage of which analysis, so that the SIGKILL that ends a deploy's grace period is
+    not counted as a crash of those analyses (worker.lease.attempt)."""
+    from celery.worker import state
+
+    for request in list(state.active_requests):
+        job = request.args[0] if request.args else request.kwargs.get("job_json")
+        if isinstance(job, dict) and job.get("work_dir") and request.worker_pid:
+            lease.note_stopping(job["work_dir"], request.worker_pid)
 
 
 def _backoff(retries: int) -> float:

@@ -9,6 +9,7 @@ so nothing here is rescued by Redis redelivering on its own.
 
 from __future__ import annotations
 
+import signal
 import time
 from dataclasses import dataclass
 from functools import partial
@@ -252,3 +253,42 @@ def test_a_job_that_kills_its_worker_twice_fails_with_the_reason(
         assert logs.count("exited with 'signal 9 (SIGKILL)'") == 2 and len(procs) == 1
     else:
         assert len(procs) == 3 and row.recoveries == 2
+
+
+def test_deploys_that_sigkill_a_stage_twice_do_not_fail_the_analysis(
+    worker_env, workers, service, short_video
+):
+    """A deploy stops a worker as docker does: SIGTERM to the master, SIGKILL of the whole
+    container when the grace period ends with the stage still running. Twice in stage 3:
+    unlike the OOM killer's two SIGKILLs (the test above), these are not crashes."""
+    worker_env.update(COACH_CHUNKS="1")
+    name = service.create("a-deploys", short_video)
+    work_dir = service.row(name).work_dir
+    ledger = AnalysisFolder(work_dir).attempts(AnalysisFolder(work_dir).chunk(0, 1))
+    last_run = ""
+    for deploy in range(2):
+        proc = workers.start(app=FAKE_APP, name=f"release-{deploy}")
+        wait_new_run(ledger, last_run, workers)
+        last_run = ledger.read_text()
+        time.sleep(2 * SECONDS_PER_FRAME)  # well into the chunk
+        proc.send_signal(signal.SIGTERM)  # the master waits for the running stage...
+        time.sleep(0.5)
+        workers.kill(proc)  # ...which the grace period does not outlast
+    workers.start(app=FAKE_APP, name="release-2")
+    row = service.wait_final(name, 120, workers)
+    assert row.status == "done", (row.status, row.error)
+    assert row.recoveries == 2
+    assert workers.logs().count("not counted as a crash") == 2
+
+
+def wait_new_run(ledger: Path, last_run: str, workers: Workers, timeout: float = 60) -> None:
+    """Until a run of the stage other than ``last_run`` (a ledger's text) has started."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            if ledger.read_text() not in ("", last_run):
+                return
+        except OSError:
+            pass
+        time.sleep(0.02)
+    raise AssertionError(f"no new run of {ledger.name}\n{workers.logs()[-3000:]}")

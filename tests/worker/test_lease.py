@@ -53,6 +53,48 @@ def test_a_stage_that_killed_its_worker_twice_is_refused(tmp_path):
             pytest.fail("a third run must not start")
 
 
+def _killed_by_a_deploy(work_dir: Path, output: Path, *, told: bool) -> None:
+    """A run SIGKILLed mid-stage, its master told to stop first (``told``) or not."""
+    started = work_dir / "started"
+    started.unlink(missing_ok=True)
+    child = FORK.Process(target=_sigterm_inside, args=(str(work_dir), output, str(started), False))
+    child.start()
+    deadline = time.monotonic() + 10
+    while not started.exists() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    if told:
+        lease.note_stopping(work_dir, child.pid)
+    os.kill(child.pid, signal.SIGKILL)
+    child.join(10)
+
+
+def test_runs_killed_after_their_worker_was_told_to_stop_are_not_crashes(tmp_path):
+    output = AnalysisFolder(tmp_path).prepared
+    for _ in range(3):  # three deploys in the same stage
+        _killed_by_a_deploy(tmp_path, output, told=True)
+    with lease.attempt(tmp_path, output, max_crashes=2):
+        pass  # runs: none of the three counted
+    for _ in range(2):  # the OOM killer gives no notice
+        _killed_by_a_deploy(tmp_path, output, told=False)
+    with pytest.raises(lease.RepeatedCrash), lease.attempt(tmp_path, output, max_crashes=2):
+        pass
+
+
+def test_a_notice_older_than_the_run_does_not_excuse_it(tmp_path):
+    """A notice left by a worker stopped earlier (its run finished within the grace period)
+    must not excuse a later crash of a run that happens to have the same name."""
+    output = AnalysisFolder(tmp_path).prepared
+    _killed_by_a_deploy(tmp_path, output, told=False)
+    _, runner = lease._read_ledger(AnalysisFolder(tmp_path).attempts(output))
+    notice = AnalysisFolder(tmp_path).stopping(runner)
+    notice.parent.mkdir(exist_ok=True)
+    notice.touch()
+    os.utime(notice, (time.time() - 60,) * 2)
+    _killed_by_a_deploy(tmp_path, output, told=False)
+    with pytest.raises(lease.RepeatedCrash), lease.attempt(tmp_path, output, max_crashes=2):
+        pass
+
+
 def test_repeated_crash_survives_celery_storing_it():
     exc = lease.RepeatedCrash.after(2)
     assert str(type(exc)(*exc.args)) == str(exc)  # rebuilt from its args, as Celery does
