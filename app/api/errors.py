@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Iterable
 from http import HTTPStatus
 from typing import Any
 
@@ -93,12 +94,24 @@ async def _api_error(_request: Request, exc: ApiError) -> JSONResponse:
 def _allowed_methods(request: Request) -> str:
     """Every method some route serves at this path. Starlette's 405 names only those of the
     first route it tried, and FastAPI makes one route per method."""
+    return ", ".join(sorted(_methods_at(request.app.router.routes, request.scope)))
+
+
+def _methods_at(routes: Iterable[Any], scope: dict) -> set[str]:
     methods: set[str] = set()
-    for route in request.app.router.routes:
-        match, _ = route.matches(request.scope)
+    for route in routes:
+        # FastAPI >= 0.16x keeps an included router whole: its routes are its candidates.
+        candidates = getattr(route, "effective_candidates", None)
+        if callable(candidates):
+            methods |= _methods_at(candidates(), scope)
+            continue
+        match, _ = route.matches(scope)
         if match != Match.NONE:
-            methods |= set(getattr(route, "methods", None) or ())
-    return ", ".join(sorted(methods))
+            served = getattr(route, "methods", None)
+            if served is None:
+                served = getattr(getattr(route, "original_route", None), "methods", None)
+            methods |= set(served or ())
+    return methods
 
 
 async def _http_error(request: Request, exc: StarletteHTTPException) -> Response:

@@ -222,12 +222,7 @@ def build_action_model(takes: Sequence[Take], settings: TakesSettings | None = N
         Fewer than two takes, or fewer than two left once far takes are left out.
     """
     s = settings or TakesSettings()
-    if len(takes) < 2:
-        raise InvalidInput("a reference from takes needs at least two takes")
-    for t in takes:
-        if len(t.joints) > s.max_frames or len(t.joints) < 2:
-            raise InvalidInput(f"take {t.name}: {len(t.joints)} frames; a take is one "
-                               f"performance of 2 to {s.max_frames} frames")  # fmt: skip
+    _check_takes(takes, s)
     fps = float(takes[0].fps)
     joints = [_at_fps(t, fps) for t in takes]
     psi = [posture_vectors(j, t.shape.offsets) for j, t in zip(joints, takes, strict=True)]
@@ -235,20 +230,8 @@ def build_action_model(takes: Sequence[Take], settings: TakesSettings | None = N
     warnings: list[str] = []
     # each pass leaves out the far takes; the model is learnt on the takes that remain
     while True:
-        space = ActionSpace.fit(np.concatenate([p for p, k in zip(psi, kept, strict=True) if k]),
-                                s.share)  # fmt: skip
-        x = [space.project(p) for p in psi]
-        D = _distances(x, kept, s)
-        median = _median_take(D, kept)
-        syncs = tuple(
-            _identity(len(x[median]))
-            if i == median
-            else synchronise(x[median], x[i], mu=s.mu, band=s.band)
-            for i in range(len(takes))
-        )
-        warped = [warp(j, sy) for j, sy in zip(joints, syncs, strict=True)]
-        warped = [w @ rot_y(float(facing_turn(w, warped[median]))).T for w in warped]
-        far = _far_takes(warped, median, kept, s)
+        sync = _synchronise_kept(joints, psi, kept, s)
+        far = _far_takes(sync.warped, sync.median, kept, s)
         if not far:
             break
         for i, why in far:
@@ -256,20 +239,69 @@ def build_action_model(takes: Sequence[Take], settings: TakesSettings | None = N
             warnings.append(f"take {takes[i].name} left out: {why}")
         if kept.sum() < 2:
             raise InvalidInput("fewer than two takes of one action remain: " + "; ".join(warnings))
-    k = np.flatnonzero(kept)
-    dirs = np.stack([bone_directions(warped[i]) for i in k])  # (I, P, 16, 3)
+    return _mean_model(takes, sync, kept, tuple(warnings), s)
+
+
+def _check_takes(takes: Sequence[Take], s: TakesSettings) -> None:
+    if len(takes) < 2:
+        raise InvalidInput("a reference from takes needs at least two takes")
+    for t in takes:
+        if len(t.joints) > s.max_frames or len(t.joints) < 2:
+            raise InvalidInput(f"take {t.name}: {len(t.joints)} frames; a take is one "
+                               f"performance of 2 to {s.max_frames} frames")  # fmt: skip
+
+
+@dataclass(frozen=True)
+class _Synchronised:
+    """One pass over the takes: the space learnt on the kept ones, and every take in it."""
+
+    space: ActionSpace
+    x: list[np.ndarray]  # per take (T_i, b): posture coordinates
+    distances: np.ndarray  # (I, I)
+    median: int
+    syncs: tuple[Synchronisation, ...]  # per take: onto the median's timeline
+    warped: list[np.ndarray]  # per take (P, 17, 3): on the median's timeline and facing
+
+
+def _synchronise_kept(
+    joints: list[np.ndarray], psi: list[np.ndarray], kept: np.ndarray, s: TakesSettings
+) -> _Synchronised:
+    """Seed 002 sections 2-4: the action space, distances, median take and the warps."""
+    space = ActionSpace.fit(np.concatenate([p for p, k in zip(psi, kept, strict=True) if k]),
+                            s.share)  # fmt: skip
+    x = [space.project(p) for p in psi]
+    D = _distances(x, kept, s)
+    median = _median_take(D, kept)
+    syncs = tuple(
+        _identity(len(x[median])) if i == median
+        else synchronise(x[median], x[i], mu=s.mu, band=s.band)
+        for i in range(len(joints))
+    )  # fmt: skip
+    warped = [warp(j, sy) for j, sy in zip(joints, syncs, strict=True)]
+    warped = [w @ rot_y(float(facing_turn(w, warped[median]))).T for w in warped]
+    return _Synchronised(space, x, D, median, syncs, warped)
+
+
+def _mean_model(
+    takes: Sequence[Take], sync: _Synchronised, kept: np.ndarray, warnings: tuple[str, ...],
+    s: TakesSettings,
+) -> ActionModel:  # fmt: skip
+    """Seed 002 section 5: the mean motion of the kept takes and its variability."""
+    k, median = np.flatnonzero(kept), sync.median
+    dirs = np.stack([bone_directions(sync.warped[i]) for i in k])  # (I, P, 16, 3)
     mean_dirs = dirs.mean(0)
     mean_dirs /= np.maximum(np.linalg.norm(mean_dirs, axis=-1, keepdims=True), 1e-12)  # eq. 21
-    roots = np.stack([warped[i][:, 0] - warped[i][:1, 0] for i in k]).mean(0)
-    root = warped[median][:1, 0] + roots
+    roots = np.stack([sync.warped[i][:, 0] - sync.warped[i][:1, 0] for i in k]).mean(0)
+    root = sync.warped[median][:1, 0] + roots
     mean_joints = joints_from_bones(root, mean_dirs * takes[median].shape.lengths[:, None])
     ang = np.stack([_angles(d, mean_dirs) for d in dirs])  # (I, P, 16)
-    xs = np.stack([warp(x[i], syncs[i]) for i in k])  # (I, P, b)
+    xs = np.stack([warp(sync.x[i], sync.syncs[i]) for i in k])  # (I, P, b)
     mean_x = xs.mean(0)
     return ActionModel(
-        names=tuple(t.name for t in takes), kept=kept, warnings=tuple(warnings), median=median,
-        space=space, distances=D, syncs=syncs, x=tuple(x), fps=fps, shape=takes[median].shape,
-        mean_joints=mean_joints, bone_sd=np.sqrt((ang**2).mean(0)),  # eq. 22 as an angle
+        names=tuple(t.name for t in takes), kept=kept, warnings=warnings, median=median,
+        space=sync.space, distances=sync.distances, syncs=sync.syncs, x=tuple(sync.x),
+        fps=float(takes[0].fps), shape=takes[median].shape, mean_joints=mean_joints,
+        bone_sd=np.sqrt((ang**2).mean(0)),  # eq. 22 as an angle
         mean_x=mean_x, sd_x=np.sqrt(((xs - mean_x) ** 2).mean(0)),
         direction=motion_direction(mean_x, s.window), tpose=takes[median].tpose,
     )  # fmt: skip

@@ -64,3 +64,10 @@ def test_a_reference_from_one_bvh_has_no_takes_plot(client, club_ref):
     assert ref["takes_plot"] == ""
     r = client.get(f"/api/v1/references/{club_ref.reference_id}/takes.png", headers=h)
     assert r.status_code == 404
+
+
+@pytest.mark.parametrize("method", ["GET", "DELETE"])
+def test_other_methods_on_the_takes_path_are_405_not_a_bad_id(client, club, method):
+    r = client.request(method, "/api/v1/references/takes", headers=club.headers)
+    assert r.status_code == 405 and r.headers["Allow"] == "POST", r.text
+    assert client.get("/api/v1/references/999", headers=club.headers).status_code == 404

@@ -149,7 +149,9 @@ async def create_reference_from_takes(
     session: SessionDep,
     settings: SettingsDep,
     storage: StorageDep,
-    takes: Annotated[list[UploadFile], File(description="Two or more BVH takes of one action.")],
+    takes: Annotated[list[UploadFile], File(
+        description="Two or more BVH takes of one action.", json_schema_extra={"minItems": 2}
+    )],
     name: Annotated[str | None, Form(min_length=1, max_length=200)] = None,
     sport: Annotated[str, Form(max_length=40)] = "",
 ):
@@ -208,8 +210,10 @@ def list_references(who: CurrentPrincipal, session: SessionDep, page: PageDep):
     )  # fmt: skip
 
 
+# ``:int``: ``/references/takes`` is the POST route above, so GET or DELETE there answers
+# 405 (Allow: POST) rather than "reference_id is not an integer".
 @router.get(
-    "/{reference_id}", response_model=ReferencePublic, summary="One reference",
+    "/{reference_id:int}", response_model=ReferencePublic, summary="One reference",
     responses=errors(404),
 )  # fmt: skip
 def read_reference(reference_id: DbId, who: CurrentPrincipal, session: SessionDep):
@@ -293,7 +297,7 @@ async def reference_preview(reference_id: DbId, who: CurrentPrincipal, session: 
 
 
 @router.delete(
-    "/{reference_id}", status_code=204, summary="Delete a reference no analysis uses",
+    "/{reference_id:int}", status_code=204, summary="Delete a reference no analysis uses",
     responses=errors(403, 404, 409),
 )  # fmt: skip
 def delete_reference(
