@@ -168,13 +168,9 @@ class AnalysisFolder:
 
     def heartbeat_age_s(self, now: float | None = None) -> float | None:
         """Seconds since a task of the analysis last renewed its heartbeat, by the storage's
-        clock (``now``: a reading of :meth:`storage_now`); None if no task ever ran.
+        clock (``now``: a reading of :func:`storage_now`); None if no task ever ran.
         Negative while a retry countdown holds the lease into the future."""
         return file_age_s(self.heartbeat, now)
-
-    def storage_now(self) -> float | None:
-        """:func:`storage_now` for this folder."""
-        return storage_now(self.work_dir)
 
     def chunks(self, n_chunks: int) -> list[Path]:
         return [self.chunk(i, n_chunks) for i in range(n_chunks)]

@@ -141,11 +141,14 @@ return 0
 """
 
 
-def _redis_client(url: str) -> Any:
+def _redis_client(url: str) -> tuple[Any, type[Exception]]:
+    """A client of ``url`` and the exception its failures raise (redis is the worker's
+    dependency: imported only when the limits are shared)."""
     import redis
 
     # Short timeouts: a sign-in must not hang on a slow Redis; the fallback answers then.
-    return redis.Redis.from_url(url, socket_timeout=0.5, socket_connect_timeout=0.5)
+    client = redis.Redis.from_url(url, socket_timeout=0.5, socket_connect_timeout=0.5)
+    return client, redis.RedisError
 
 
 class _Fallback:
@@ -166,15 +169,14 @@ class RedisRateLimiter(RateLimiter):
 
     def __init__(self, url: str, rate_per_s: float, burst: int, prefix: str = "coach:rl:") -> None:
         super().__init__(rate_per_s, burst)
-        self.prefix, self._redis, self._fallback = prefix, _redis_client(url), _Fallback()
+        self.prefix, self._fallback = prefix, _Fallback()
+        self._redis, self._errors = _redis_client(url)
         self._take = self._redis.register_script(_TAKE)
 
     def take(self, key: object) -> float:
-        import redis
-
         try:
             return float(self._take(keys=[f"{self.prefix}{key}"], args=[self.rate, self.burst]))
-        except redis.RedisError as exc:
+        except self._errors as exc:
             self._fallback.warn(exc)
             return super().take(key)
 
@@ -188,7 +190,8 @@ class RedisSignInThrottle(SignInThrottle):
 
     def __init__(self, url: str, *, prefix: str = "coach:signin:", **kwargs: Any) -> None:
         super().__init__(**kwargs)
-        self.prefix, self._redis, self._fallback = prefix, _redis_client(url), _Fallback()
+        self.prefix, self._fallback = prefix, _Fallback()
+        self._redis, self._errors = _redis_client(url)
         self._wait = self._redis.register_script(_WAIT)
         self._failed = self._redis.register_script(_FAILED)
 
@@ -196,30 +199,24 @@ class RedisSignInThrottle(SignInThrottle):
         return self.prefix + hashlib.sha256("\0".join(key).encode()).hexdigest()[:32]
 
     def wait(self, keys: list[tuple[str, str]]) -> float:
-        import redis
-
         try:
             return float(self._wait(keys=[self._name(k) for k in keys]))
-        except redis.RedisError as exc:
+        except self._errors as exc:
             self._fallback.warn(exc)
             return super().wait(keys)
 
     def failed(self, keys: list[tuple[str, str]]) -> None:
-        import redis
-
         args = [self.backoff_s, self.max_lock_s, *(self.free[k[0]] for k in keys)]
         try:
             self._failed(keys=[self._name(k) for k in keys], args=args)
-        except redis.RedisError as exc:
+        except self._errors as exc:
             self._fallback.warn(exc)
             super().failed(keys)
 
     def succeeded(self, email: str) -> None:
-        import redis
-
         try:
             self._redis.delete(self._name(self.keys(email, "")[0]))
-        except redis.RedisError as exc:
+        except self._errors as exc:
             self._fallback.warn(exc)
         super().succeeded(email)
 

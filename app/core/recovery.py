@@ -35,14 +35,16 @@ entry message for an analysis whose heartbeat another run keeps fresh. The row's
 ``recoveries`` counter is the claim: a conditional update (``WHERE recoveries = n``) lets one
 API process of several do it.
 
-Clocks: file ages are read on the storage's clock (``worker.contract.storage_now``: the
-folder's ``clock`` file touched, its time read back), row times on the API's. So a worker or
+Clocks: file ages are read on the storage's clock (``worker.contract.storage_now``: a
+``clock`` file in the data directory touched, its time read back, once per tick), row times
+on the API's. So a worker or
 an API machine whose clock is off neither recovers a live analysis nor leaves a dead one.
 """
 
 from __future__ import annotations
 
 import logging
+import os
 import time
 from dataclasses import dataclass
 from datetime import datetime
@@ -55,7 +57,7 @@ from app.core.config import Settings
 from app.core.queue import JobQueue, QueueUnavailable, analysis_job
 from app.core.storage import Storage
 from app.models import TERMINAL_STATES, Analysis, Reference, utcnow
-from worker.contract import AnalysisFolder, BrokerTasks, file_age_s
+from worker.contract import AnalysisFolder, BrokerTasks, file_age_s, storage_now
 
 log = logging.getLogger("app.recovery")
 
@@ -77,8 +79,9 @@ class Clocks:
     storage: float
 
     @classmethod
-    def read(cls, analysis: Analysis, api_now: float) -> Clocks:
-        storage = AnalysisFolder(analysis.work_dir).storage_now()
+    def read(cls, folder: str | os.PathLike, api_now: float) -> Clocks:
+        """``api_now`` and the clock of the storage holding ``folder``."""
+        storage = storage_now(folder)
         # No folder (deleted or not yet written): no file to age, any reading will do.
         return cls(api_now, api_now if storage is None else storage)
 
@@ -106,11 +109,12 @@ def task_ids(analysis: Analysis) -> set[str]:
 
 
 def lost_cause(
-    analysis: Analysis, broker: BrokerTasks, settings: Settings, now: float
-) -> str | None:
+    analysis: Analysis, broker: BrokerTasks, settings: Settings, now: float,
+    clocks: Clocks | None = None,
+) -> str | None:  # fmt: skip
     """Why nobody works on the analysis, or None while somebody may (``now``: this API
-    process' clock)."""
-    clocks = Clocks.read(analysis, now)
+    process' clock; ``clocks``: read once for many analyses, else from its folder)."""
+    clocks = clocks or Clocks.read(analysis.work_dir, now)
     quiet = quiet_s(analysis, clocks)
     if quiet is None or quiet < settings.publish_grace_s:
         return None
@@ -142,9 +146,11 @@ def recover(
 ) -> list[str]:
     """Queue every lost analysis again; returns their ids."""
     now = time.time() if now is None else now
+    # One reading of the storage's clock per tick: every analysis folder is on it.
+    clocks = Clocks.read(settings.data_dir, now)
     suspects = [
         a for a in crud.list_active_analyses(session)
-        if (q := quiet_s(a, Clocks.read(a, now))) is not None and q >= settings.publish_grace_s
+        if (q := quiet_s(a, clocks)) is not None and q >= settings.publish_grace_s
     ]  # fmt: skip
     if not suspects:
         return []
@@ -153,7 +159,8 @@ def recover(
         return []  # broker unreachable: nothing can be queued now anyway
     # Signs read after the broker: a task that started meanwhile shows in its heartbeat.
     now = max(now, time.time())
-    lost = [a for a in suspects if lost_cause(a, broker, settings, now)]
+    clocks = Clocks.read(settings.data_dir, now)
+    lost = [a for a in suspects if lost_cause(a, broker, settings, now, clocks)]
     if not lost:
         return []
     # Redis moves a message from the queue to a worker in two steps; one caught between them
@@ -166,7 +173,7 @@ def recover(
     broker = broker.merged(again)
     recovered = []
     for analysis in lost:
-        cause = lost_cause(analysis, broker, settings, now)
+        cause = lost_cause(analysis, broker, settings, now, clocks)
         if cause is not None and _requeue(session, settings, queue, analysis, cause):
             recovered.append(analysis.id)
     return recovered
