@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 from importlib.metadata import entry_points
 
-from engine.cli import add_engine_commands, run_parsed
+from worker.engine_surface import add_engine_commands, run_parsed
 
 #: Entry-point group of ``register(subparsers)`` functions that add subcommands.
 COMMANDS = "coach.commands"

@@ -118,10 +118,8 @@ def seed_demo_analysis(session, settings, storage, queue, *, out=print) -> None:
         return
     if crud.get_analysis_by_idempotency_key(session, club_id=club.id, key=DEMO_ANALYSIS_KEY):
         return
-    from engine.io.bvh import load_reference
-    from engine.io.encode import write_video
-    from engine.synth import SynthSettings, synthesize
     from worker.contract import AnalysisFolder
+    from worker.engine_surface import SynthSettings, load_reference, synthesize, write_video
 
     analysis_id = str(uuid.uuid4())
     work_dir = storage.analysis_dir(analysis_id)

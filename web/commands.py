@@ -34,8 +34,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import viser
 
-    from engine.io.bvh import load_reference
-    from engine.io.result_reader import read_result
+    from app.web_surface import load_reference, read_result
     from web.viewer.scene import build_scene, record_scene
 
     result = read_result(args.result)

@@ -1,9 +1,10 @@
 """What the API may send to workers and read back: task names and payload schemas.
 
 Only ids, paths and small JSON cross the process boundary; arrays travel as files in the
-analysis' own folder. The app imports this module (and nothing else of the worker) to enqueue
-work; the worker never imports the app: it learns everything from the payload and reports
-through files in the analysis folder and Celery task states.
+analysis' own folder. The app enqueues work with this module (and reaches the engine's few
+in-process pieces through :mod:`worker.engine_surface`); the worker never imports the app:
+it learns everything from the payload and reports through files in the analysis folder and
+Celery task states.
 
 The analysis folder (``work_dir``) is written by the worker and read by the app and the web
 viewer; :class:`AnalysisFolder` is the only place that spells its file names.

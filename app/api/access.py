@@ -18,8 +18,7 @@ from app.api.errors import ApiError, not_found
 from app.core.reflect import Notifier, reflect
 from app.core.storage import Storage
 from app.models import Analysis, Capture, Reference, User
-from engine.errors import InvalidInput
-from engine.io.result_reader import Result
+from worker.engine_surface import InvalidInput, Result
 
 
 def _own_row(session: Session, who: Principal, kind: str, row_id: str, get) -> Any:

@@ -17,9 +17,7 @@ from functools import lru_cache
 from typing import Any
 
 from app.core.summary import summarise_segments
-from engine.errors import InvalidInput
-from engine.io.result_reader import Result, as_result, read_result
-from engine.report import tempo_words
+from worker.engine_surface import InvalidInput, Result, as_result, read_result, tempo_words
 
 #: A change smaller than this (degrees, or tempo ratio x 100 %) counts as "about the same".
 SAME_ERROR_DEG = 1.0

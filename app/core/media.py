@@ -20,17 +20,22 @@ from typing import Any
 
 import numpy as np
 
-from engine.body.limits import JOINT_ANGLES, joint_angles_deg
-from engine.body.skeleton import (
+from worker.engine_surface import (
     BONE_CHILD,
     BONE_LABELS,
     BONE_NAMES,
     BONE_PARENT,
+    JOINT_ANGLES,
     JOINTS,
+    MISFIT_RGB,
+    Result,
+    as_result,
     column_name,
+    draw_skeleton,
+    joint_angles_deg,
+    load_reference,
+    write_bvh,
 )
-from engine.io.result_reader import Result, as_result
-from engine.report import MISFIT_RGB
 
 #: Longest side of the browser rendition; phones do not need more and encoding stays quick.
 MAX_RENDITION_HEIGHT = 720
@@ -151,7 +156,6 @@ def video_thumbnail(video_path: str | Path, work_dir: str | Path, frame: int = 0
 # ---- skeleton pictures
 @lru_cache(maxsize=16)
 def _reference_joints(path: str, mtime: float) -> np.ndarray:
-    from engine.io.bvh import load_reference
 
     return np.asarray(load_reference(path).motion.joints, float)
 
@@ -321,8 +325,6 @@ def report_stills(
     import av
     import cv2
 
-    from engine.report import draw_skeleton
-
     result = as_result(result)
     frames = result.frames
     picks = still_frames(result, n)
@@ -397,7 +399,6 @@ def result_csv(result: Result | Mapping[str, Any]) -> str:
 
 def result_bvh(result: Result | Mapping[str, Any], dest: Path) -> Path:
     """The performer's selected motion (joints_3d with root motion) as BVH at ``dest``."""
-    from engine.io.bvh import write_bvh
 
     result = as_result(result)
     return write_bvh(dest, result.joints_3d, result.video.fps or 30.0)

@@ -30,8 +30,8 @@ from app.core.security import sign_webhook
 from app.core.storage import Storage
 from app.models import ANALYSIS_STATES, TERMINAL_STATES, Analysis, utcnow
 from app.schemas import AnalysisPublic
-from engine.errors import InvalidInput
 from worker.contract import AnalysisFolder
+from worker.engine_surface import InvalidInput
 
 log = logging.getLogger("app.reflect")
 

@@ -16,18 +16,22 @@ from app import models
 from app.api.errors import ApiError
 from app.models import Analysis, Reference
 from app.schemas import SegmentPublic
-from engine.body.limits import JOINT_ANGLES, joint_angles_deg
-from engine.body.skeleton import (
+from worker.engine_surface import (
     BEND_LABELS,
     BONE_CHILD,
     BONE_LABELS,
     BONE_NAMES,
     BONE_PARENT,
+    JOINT_ANGLES,
+    InvalidInput,
+    Result,
+    ResultFrame,
+    ResultSegment,
+    as_result,
     bone_label,
+    joint_angles_deg,
+    tempo_words,
 )
-from engine.errors import InvalidInput
-from engine.io.result_reader import Result, ResultFrame, ResultSegment, as_result
-from engine.report import tempo_words
 
 
 def misfit_bones(frames: Sequence[ResultFrame], height: float) -> list[str]:

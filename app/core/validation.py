@@ -9,22 +9,28 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from app.core.config import Settings
-from engine.errors import InvalidInput
-from engine.reference.domain import check_variation, reference_segments
-from engine.reference.domain import parse_domain as engine_parse
-
-if TYPE_CHECKING:
-    from engine.io.bvh import BvhLimits
+from worker.engine_surface import (
+    SD_FLOOR_DEG,
+    BvhLimits,
+    InvalidInput,
+    VideoLimits,
+    build_action_model,
+    check_variation,
+    load_reference,
+    load_takes,
+    plot_takes,
+    reference_segments,
+    write_bvh,
+)
+from worker.engine_surface import parse_domain as engine_parse
+from worker.engine_surface import probe_video as engine_probe
 
 
 def probe_video(path: Path, settings: Settings) -> dict[str, Any]:
     """Open the video and decode its first frames; returns what the probe learned."""
-    from engine.io.video import VideoLimits
-    from engine.io.video import probe_video as engine_probe
-
     limits = VideoLimits(
         max_duration_s=settings.max_video_duration_s, max_bytes=settings.max_video_bytes
     )
@@ -91,8 +97,6 @@ def parse_domain(raw: bytes) -> dict[str, Any]:
 
 def reference_limits(settings: Settings) -> BvhLimits:
     """The engine's BVH limits from the service settings (6 channels per joint at most)."""
-    from engine.io.bvh import BvhLimits
-
     return BvhLimits(
         max_frames=settings.max_reference_frames,
         max_duration_s=settings.max_reference_duration_s,
@@ -115,8 +119,6 @@ def inspect_reference(
     numbers for n segments. Segment names that do not match their number are refused here,
     where the coach can fix them, rather than dropped at analysis time.
     """
-    from engine.io.bvh import load_reference
-
     domain = domain or {}
     ref = load_reference(
         path, mapping=domain.get("mapping"), units_to_m=domain.get("units_to_m"),
@@ -167,10 +169,6 @@ def build_from_takes(
         A take that is not BVH, cannot be mapped, is over the limits, or fewer than two
         takes of one action (the message names the take).
     """
-    from engine.io.bvh import write_bvh
-    from engine.reference.action_model import SD_FLOOR_DEG, build_action_model, load_takes
-    from engine.reference.takes_plot import plot_takes
-
     takes = load_takes(paths, reference_limits(settings), names)
     model = build_action_model(takes)
     bvh = write_bvh(out_dir / "reference.bvh", model.file_joints, model.fps, model.shape)

@@ -95,10 +95,29 @@ def build_result(
         add_variation(frames, segments, summary, selection, domain, reference_frame_offset)
     timing = {k: float(v) for k, v in timing_s.items()}
     timing.setdefault("total", float(sum(timing.values())))
-    cam = camera.to_dict()
-    cam.setdefault("theta_z_deg", float(np.degrees(camera.theta_z)))
     return {
         "version": 1,
+        **_inputs_doc(reference_name, reference_frames, reference_fps, video, video_frame_offset),
+        "joints": list(JOINTS),
+        "bones": list(BONE_NAMES),
+        "camera": _camera_doc(camera),
+        "frames": frames,
+        "segments": segments,
+        "summary": summary,
+        "domain": domain.to_dict() if domain is not None else None,
+        "timing_s": timing,
+    }
+
+
+def _inputs_doc(
+    reference_name: str,
+    reference_frames: int,
+    reference_fps: float,
+    video: Mapping[str, float | int],
+    video_frame_offset: int,
+) -> dict[str, Any]:
+    """The ``reference`` and ``video`` entries: what was analysed (see :func:`build_result`)."""
+    return {
         "reference": {
             "name": reference_name, "frames": int(reference_frames), "fps": float(reference_fps)
         },
@@ -107,15 +126,14 @@ def build_result(
             "width": int(video["width"]), "height": int(video["height"]),
             "first_frame": int(video_frame_offset),
         },
-        "joints": list(JOINTS),
-        "bones": list(BONE_NAMES),
-        "camera": cam,
-        "frames": frames,
-        "segments": segments,
-        "summary": summary,
-        "domain": domain.to_dict() if domain is not None else None,
-        "timing_s": timing,
     }  # fmt: skip
+
+
+def _camera_doc(camera: Camera) -> dict[str, Any]:
+    """The ``camera`` entry: stage 1's camera, with its roll in degrees for people."""
+    cam = camera.to_dict()
+    cam.setdefault("theta_z_deg", float(np.degrees(camera.theta_z)))
+    return cam
 
 
 def _frame_docs(

@@ -23,8 +23,7 @@ from app.core import invites, media, sessions
 from app.core.reflect import reflect
 from app.core.summary import page_summary
 from app.models import ANALYSIS_STATES, User
-from engine.body.skeleton import BONE_LABELS, BONE_NAMES
-from engine.report import ONE_CAMERA_NOTE
+from app.web_surface import BONE_LABELS, BONE_NAMES, ONE_CAMERA_NOTE
 
 TEMPLATES = Jinja2Templates(directory=Path(__file__).resolve().parents[1] / "templates")
 TEMPLATES.env.globals["one_camera_note"] = ONE_CAMERA_NOTE

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 import viser
 
+from app.web_surface import AnalysisFolder, load_candidate_chunk, load_prepared
 from web.viewer.scene import (
     CAMERA_FOV_DEG,
     CANDIDATE_RGB,
@@ -30,7 +31,6 @@ from web.viewer.scene import (
     _segments_of,
     frame_points,
 )
-from worker.contract import AnalysisFolder
 
 #: Playback rate of the partial scene's loop over the video frames (frames per second).
 PARTIAL_FPS = 6.0
@@ -85,13 +85,11 @@ class FolderState:
 
 def refresh(state: FolderState, work_dir: str | Path) -> bool:
     """Read what is new in the analysis folder into ``state``; True if anything changed."""
-    from engine.stage_outputs import CandidateChunk, Prepared
-
     folder = AnalysisFolder(work_dir)
     changed = False
     if state.aligned is None and folder.prepared.is_file():
         try:
-            p = Prepared.load(folder.prepared)
+            p = load_prepared(folder.prepared)
         except Exception:  # unreadable now: try again on the next poll
             return False
         state.aligned = p.initial_postures(range(p.n_frames))[:, 0]
@@ -104,7 +102,7 @@ def refresh(state: FolderState, work_dir: str | Path) -> bool:
             if path.name in state.chunks_seen:
                 continue
             try:
-                chunk = CandidateChunk.load(path)
+                chunk = load_candidate_chunk(path)
             except Exception:
                 continue
             state.chunks_seen.add(path.name)

@@ -18,9 +18,17 @@ from typing import Any
 import numpy as np
 import viser
 
-from engine.body.skeleton import BONE_CHILD, BONE_PARENT
-from engine.io.result_reader import Result, ResultFrame, ResultSegment, as_result
-from engine.report import ERROR_RED_DEG, MISFIT_RGB, error_colors
+from app.web_surface import (
+    BONE_CHILD,
+    BONE_PARENT,
+    ERROR_RED_DEG,
+    MISFIT_RGB,
+    Result,
+    ResultFrame,
+    ResultSegment,
+    as_result,
+    error_colors,
+)
 
 #: What an unsure bone fades to (see :func:`bone_colours`).
 UNSURE_GREY = np.array([0.6, 0.6, 0.6])

@@ -43,9 +43,8 @@ from app.schemas import (
     AnalysisState,
     SegmentsPublic,
 )
-from engine.errors import InvalidInput
-from engine.report import ONE_CAMERA_NOTE
 from worker.contract import AnalysisFolder, AnalysisJob
+from worker.engine_surface import ONE_CAMERA_NOTE, InvalidInput
 
 log = logging.getLogger("app.analyses")
 

@@ -40,8 +40,8 @@ from app.schemas import (
     CaptureToReference,
     ReferencePublic,
 )
-from engine.errors import InvalidInput
 from worker.contract import CaptureFolder, CaptureJob
+from worker.engine_surface import InvalidInput
 
 router = APIRouter(prefix="/captures", tags=["captures"], responses=errors(401, 429))
 

@@ -19,8 +19,7 @@ from pydantic import BaseModel
 
 from app.api.deps import CurrentPrincipal
 from app.api.errors import ApiError, errors
-from engine.errors import InvalidInput
-from engine.stages.framing import check_framing
+from worker.engine_surface import InvalidInput, check_framing
 
 router = APIRouter(prefix="/framing", tags=["analyses"], responses=errors(401, 429))
 

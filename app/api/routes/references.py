@@ -23,7 +23,7 @@ from app.api.params import DbId
 from app.core import media, validation
 from app.core.storage import Storage, UploadTooLarge
 from app.schemas import DomainUpdate, ReferencePublic, ReferencesPublic
-from engine.errors import InvalidInput
+from worker.engine_surface import InvalidInput
 
 router = APIRouter(prefix="/references", tags=["references"], responses=errors(401, 429))
 
@@ -149,9 +149,10 @@ async def create_reference_from_takes(
     session: SessionDep,
     settings: SettingsDep,
     storage: StorageDep,
-    takes: Annotated[list[UploadFile], File(
-        description="Two or more BVH takes of one action.", json_schema_extra={"minItems": 2}
-    )],
+    takes: Annotated[
+        list[UploadFile],
+        File(description="Two or more BVH takes of one action.", json_schema_extra={"minItems": 2}),
+    ],
     name: Annotated[str | None, Form(min_length=1, max_length=200)] = None,
     sport: Annotated[str, Form(max_length=40)] = "",
 ):

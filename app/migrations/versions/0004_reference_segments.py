@@ -33,7 +33,7 @@ REFERENCES = sa.table(
 
 def _derived(bvh: Path, config: dict | None) -> dict | None:
     from app.core import validation
-    from engine.errors import InvalidInput
+    from worker.engine_surface import InvalidInput
 
     try:
         return validation.inspect_reference(bvh, config)
