@@ -50,6 +50,7 @@ from engine.stages.calibration import (
     refine_on_frames,
 )
 from engine.stages.candidates import estimate_candidates_chunk, frame_rngs
+from engine.stages.candidates.key_frames import choose_key_frames, key_span
 from engine.stages.foreground import ForegroundResult, extract_foreground, outline
 from engine.stages.perception import (
     Perception,
@@ -156,24 +157,40 @@ def candidates(
     """
     s = settings or Settings()
     frames = range(prepared.n_frames) if frames is None else frames
-    inputs = _chunk_inputs(prepared, frames, s)
+    inputs, lead = _chunk_inputs(prepared, frames, s)
     t0 = time.perf_counter()
     out = estimate_candidates_chunk(**inputs, on_progress=on_progress)
-    return _chunk(prepared, frames, out, time.perf_counter() - t0)
+    return _chunk(prepared, frames, out[lead : lead + len(frames)], time.perf_counter() - t0)
 
 
-def _chunk_inputs(prepared: Prepared, frames: range, s: Settings) -> dict:
+def _key_frames(prepared: Prepared, s: Settings) -> np.ndarray:
+    """Stage 3's key frames over the whole analysis, shape (T',) of bool (all with
+    ``candidates.key_gap`` 1), from the expert's own motion B_C(t'): the turn T_t', sampled
+    on a coarse grid, jumps by a few degrees between frames where the body does not move."""
+    c = s.candidates
+    if c.key_gap == 1:
+        return np.ones(prepared.n_frames, bool)
+    expert = prepared.initial_postures(range(prepared.n_frames))[:, 1]
+    return choose_key_frames(expert, c.key_gap, c.key_motion_deg)
+
+
+def _chunk_inputs(prepared: Prepared, frames: range, s: Settings) -> tuple[dict, int]:
     """The arguments of :func:`estimate_candidates_chunk` for ``frames``: only their frames'
-    data, so a chunk ships to another process cheaply."""
+    data, so a chunk ships to another process cheaply. They cover ``frames`` widened to the
+    adjacent key frames (:func:`key_span`); the second value is where ``frames`` start in
+    the estimates."""
     if len(frames) == 0 or frames.start < 0 or frames.stop > prepared.n_frames:
         raise InvalidInput(f"frames must be a non-empty range within 0..{prepared.n_frames}")
-    idx = np.asarray(frames)
+    keys = _key_frames(prepared, s)
+    span = key_span(frames, keys)
+    idx = np.asarray(span)
     return dict(
         target_silhouettes=prepared.silhouettes[idx], target_edges=prepared.edges[idx],
         camera=prepared.camera, shape=prepared.shape,
-        initial_joints=prepared.initial_postures(frames), settings=s.candidates,
-        rng=frame_rngs(s.seed, frames), keypoints=prepared.frame_keypoints(frames),
-    )  # fmt: skip
+        initial_joints=prepared.initial_postures(span), settings=s.candidates,
+        rng=frame_rngs(s.seed, span), keypoints=prepared.frame_keypoints(span),
+        keys=keys[idx],
+    ), frames.start - span.start  # fmt: skip
 
 
 def _chunk(prepared: Prepared, frames: range, out: list, seconds: float) -> CandidateChunk:
@@ -220,11 +237,15 @@ def all_candidates(
     # child would inherit in an unknown state.
     context = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
-        futures = {pool.submit(_timed_chunk, _chunk_inputs(prepared, r, s)): r for r in ranges}
+        futures = {}
+        for r in ranges:
+            inputs, lead = _chunk_inputs(prepared, r, s)
+            futures[pool.submit(_timed_chunk, inputs)] = (r, lead)
         chunks = []
         for n_done, future in enumerate(as_completed(futures), start=1):
             out, seconds = future.result()
-            chunks.append(_chunk(prepared, futures[future], out, seconds))
+            r, lead = futures[future]
+            chunks.append(_chunk(prepared, r, out[lead : lead + len(r)], seconds))
             if on_progress is not None:
                 on_progress("candidates", n_done / len(ranges))
     return sorted(chunks, key=lambda c: int(c.frames[0]))

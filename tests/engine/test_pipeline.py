@@ -125,6 +125,23 @@ def test_candidates_do_not_depend_on_the_chunking(prepared) -> None:
     )
 
 
+def test_key_frames_do_not_depend_on_the_chunking_either(prepared) -> None:
+    # frames between key frames start from their key frames' solutions: a chunk that cuts
+    # between two key frames estimates them too, so each frame's candidates stay the same
+    keyed = Settings.from_dict({**SETTINGS, "candidates": {**SETTINGS["candidates"], "key_gap": 3}})
+    whole = candidates(prepared, range(prepared.n_frames), keyed)
+    parts = [candidates(prepared, r, keyed) for r in (range(0, 4), range(4, 5), range(5, 11))]
+    parts.append(candidates(prepared, range(11, prepared.n_frames), keyed))
+    cut = [k for c in parts for k in c.candidates]
+    assert [int(t) for c in parts for t in c.frames] == list(range(prepared.n_frames))
+    for a, b in zip(whole.candidates, cut, strict=True):
+        np.testing.assert_array_equal(a, b)
+    # and they are not the full search's: the frames between key frames were estimated apart
+    full = candidates(prepared, range(prepared.n_frames), S)
+    same = [np.array_equal(a, b) for a, b in zip(whole.candidates, full.candidates, strict=True)]
+    assert same[0] and same[-1] and not all(same)
+
+
 def test_stage_3_on_two_processes_gives_the_same_candidates(prepared) -> None:
     one = all_candidates(prepared, S, workers=1)
     progress: list[float] = []

@@ -23,7 +23,10 @@ silhouette sees in-plane bends and hardly sees turns in depth, where BP alone dr
 
 Frames are independent given stage 2's output, so workers can fan out over frames; with one
 random stream per frame and ``n_prev`` 0 (the defaults) a frame's candidates do not depend on
-the chunk that computes it (:mod:`.estimate`).
+the chunk that computes it (:mod:`.estimate`). With ``key_gap`` > 1 (beyond the thesis,
+:mod:`.key_frames`) the full search runs on key frames chosen by the expert's motion, and a
+frame between two of them is refined from their solutions without BP; a chunk then also
+estimates the key frames just outside it, so this independence holds too.
 
 Every candidate carries its d_S (:mod:`.scorer`); stage 4 weighs it against the distance to
 the reference (:attr:`engine.stages.selection.SelectionSettings.image_weight`), so the initial

@@ -26,6 +26,7 @@ from engine.stages.candidates.bp import _bp_estimate, _bp_prior
 from engine.stages.candidates.escape import _polish
 from engine.stages.candidates.flips import generate_candidates
 from engine.stages.candidates.in_plane import _in_plane_candidates
+from engine.stages.candidates.key_frames import between_settings, carry_deviation
 from engine.stages.candidates.occlusion import _reset_occluded
 from engine.stages.candidates.postures import _frame_offsets, limits_ok, perturb_parts
 from engine.stages.candidates.scorer import _Scorer
@@ -114,9 +115,9 @@ def estimate_candidates(
     InvalidInput
         Shapes that do not match, an empty silhouette, non-finite postures, bad settings.
     """
-    s = settings or CandidateSettings()
-    s.validate()
-    init = _check_inputs(target_silhouette, target_edges, camera, shape, initial_joints)
+    s, init, scorer = _frame_setup(
+        target_silhouette, target_edges, camera, shape, initial_joints, settings, keypoints
+    )
     if not isinstance(rng, np.random.Generator):
         raise InvalidInput("rng must be a numpy.random.Generator")
     flags: list[str] = []
@@ -124,10 +125,6 @@ def estimate_candidates(
     pool = init
     if prev is not None and len(prev.candidates):
         pool = np.concatenate([init, prev.candidates[np.argsort(prev.cost)[: s.n_prev]]])
-    target = Target.from_masks(
-        target_silhouette, target_edges, sigma_px=s.edge_sigma_px, xi=s.edge_xi
-    )
-    scorer = _Scorer(target, shape, camera, ref, s, keypoints)
     d0 = scorer.full(pool)
     orient_src = _orientations(pool, len(init), d0, s, flags)
     if s.estimator == "in_plane":
@@ -146,6 +143,67 @@ def estimate_candidates(
     if in_plane is not None:  # the in-plane estimate and its flips first (hybrid)
         cands = _append_distinct(in_plane[: max(1, s.n_candidates // 2)], cands, s.n_candidates)
     return _scored(scorer, cands, ref, s, flags, history)
+
+
+def estimate_between(
+    target_silhouette: np.ndarray,
+    target_edges: np.ndarray,
+    camera: Camera,
+    shape: BodyShape,
+    initial_joints: np.ndarray,
+    neighbours: Sequence[tuple[np.ndarray, np.ndarray]],
+    *,
+    settings: CandidateSettings | None = None,
+    keypoints: tuple[np.ndarray, np.ndarray] | None = None,
+) -> FrameCandidates:
+    """Candidates of a frame between key frames: the full search without BP (issue 25).
+
+    Parameters as :func:`estimate_candidates`, and ``neighbours``: for each adjacent key
+    frame, its best posture and its first initial posture, both (17, 3). They are carried
+    onto this frame's reference (:func:`.key_frames.carry_deviation`); the start that explains
+    the image best is refined (6.4) from ``settings.between_step0_deg``, then occluded parts
+    are reset (6.5) and flipped (4.6.5) as after BP; with the hybrid estimator the in-plane
+    fit is the same as on key frames. No random numbers are drawn.
+    """
+    s, init, scorer = _frame_setup(
+        target_silhouette, target_edges, camera, shape, initial_joints, settings, keypoints
+    )
+    flags: list[str] = []
+    ref = init[0]
+    if s.estimator == "in_plane":
+        cands = _in_plane_candidates(scorer, init, [ref], camera, s)
+        return _scored(scorer, cands, ref, s, flags, [float(scorer.full(ref[None])[0])])
+    carried = [carry_deviation(q, r, ref) for q, r in neighbours]
+    pool = np.stack([*init, *carried])
+    d0 = scorer.full(pool)
+    found = _polish(scorer, [pool[int(np.argmin(d0))], ref], camera, between_settings(s), ref)
+    offsets = _frame_offsets(ref, shape.offsets)
+    est = _reset_occluded(scorer, found[0][1], ref, offsets, s, flags)
+    cands = generate_candidates(est, [ref], camera, s)
+    starts = [q for q in [init[0], *carried] if limits_ok(q)]
+    if starts:
+        cands = _append_distinct(cands, np.stack(starts), s.n_candidates)
+    if s.estimator == "hybrid":
+        in_plane = _in_plane_candidates(scorer, init, [ref], camera, s)
+        cands = _append_distinct(in_plane[: max(1, s.n_candidates // 2)], cands, s.n_candidates)
+    return _scored(scorer, cands, ref, s, flags, [float(d0.min()), found[0][0]])
+
+
+def _frame_setup(
+    sil: np.ndarray,
+    edges: np.ndarray,
+    camera: Camera,
+    shape: BodyShape,
+    initial_joints: np.ndarray,
+    settings: CandidateSettings | None,
+    keypoints: tuple[np.ndarray, np.ndarray] | None,
+) -> tuple[CandidateSettings, np.ndarray, _Scorer]:
+    """The checked settings, the initial postures (M, 17, 3) and the frame's scorer."""
+    s = settings or CandidateSettings()
+    s.validate()
+    init = _check_inputs(sil, edges, camera, shape, initial_joints)
+    target = Target.from_masks(sil, edges, sigma_px=s.edge_sigma_px, xi=s.edge_xi)
+    return s, init, _Scorer(target, shape, camera, init[0], s, keypoints)
 
 
 def _orientations(
@@ -266,6 +324,7 @@ def estimate_candidates_chunk(
     rng: np.random.Generator | Sequence[np.random.Generator],
     prev: FrameCandidates | None = None,
     keypoints: tuple[np.ndarray, np.ndarray] | None = None,
+    keys: np.ndarray | None = None,
     on_progress: Callable[[str, float], None] | None = None,
 ) -> list[FrameCandidates]:
     """Candidates of consecutive frames, each using the previous one's (thesis 4.6, 6.7).
@@ -277,12 +336,16 @@ def estimate_candidates_chunk(
     shape : BodyShape
     initial_joints : ndarray, shape (N, 17, 3) or (N, M, 17, 3)
     settings, prev
-        As :func:`estimate_candidates`; ``prev`` is the frame before the chunk.
+        As :func:`estimate_candidates`; ``prev`` is the frame before the chunk (with
+        ``keys``, the previous key frame's candidates seed the next key frame).
     rng : numpy.random.Generator, or a sequence of N of them
         One stream for the chunk, or one per frame (then, with ``settings.n_prev`` 0, each
         frame's candidates are independent of the chunk it is computed in).
     keypoints : (ndarray (N, R, 17, 2), ndarray (N, R, 17)), optional
         Each frame's keypoint readings and confidences.
+    keys : ndarray of bool, shape (N,), optional
+        Key frames (:func:`.key_frames.choose_key_frames`); the others are estimated from
+        their adjacent key frames by :func:`estimate_between`. All frames by default.
     on_progress : callable (stage, fraction), optional
 
     Returns
@@ -297,30 +360,46 @@ def estimate_candidates_chunk(
     sils = np.asarray(target_silhouettes)
     edges = np.asarray(target_edges)
     init = np.asarray(initial_joints, float)
+    n = _chunk_length(sils, init)
+    rngs = [rng] * n if isinstance(rng, np.random.Generator) else list(rng)
+    if len(rngs) != n:
+        raise InvalidInput(f"rng must be one generator or one per frame ({n})")
+    keys = np.ones(n, bool) if keys is None else np.asarray(keys, bool)
+    if keys.shape != (n,) or not (keys[0] and keys[-1]):
+        raise InvalidInput(f"keys must be {n} flags whose first and last are set")
+    out: dict[int, FrameCandidates] = {}
+    key_idx = np.flatnonzero(keys)
+    # key frames first, in order (``prev`` threads through them), then the frames between
+    for t in [int(k) for k in (*key_idx, *np.flatnonzero(~keys))]:
+        kp_t = None if keypoints is None else (keypoints[0][t], keypoints[1][t])
+        if keys[t]:
+            out[t] = prev = estimate_candidates(
+                sils[t], edges[t], camera, shape, init[t],
+                settings=settings, rng=rngs[t], prev=prev, keypoints=kp_t,
+            )  # fmt: skip
+        else:
+            after = int(np.searchsorted(key_idx, t))
+            neighbours = [(out[k].best, _first(init[k])) for k in key_idx[after - 1 : after + 1]]
+            out[t] = estimate_between(
+                sils[t], edges[t], camera, shape, init[t], neighbours,
+                settings=settings, keypoints=kp_t,
+            )  # fmt: skip
+        if on_progress is not None:
+            on_progress("candidates", len(out) / n)
+    return [out[t] for t in range(n)]
+
+
+def _chunk_length(sils: np.ndarray, init: np.ndarray) -> int:
+    """The chunk's number of frames, after checking that its inputs agree on it."""
     if sils.ndim != 3:
         raise InvalidInput(f"target_silhouettes must have shape (N, H, W), got {sils.shape}")
     if init.shape[0] != sils.shape[0]:
         raise InvalidInput(
             f"initial_joints must have one entry per frame ({sils.shape[0]}), got {init.shape[0]}"
         )
-    rngs = [rng] * sils.shape[0] if isinstance(rng, np.random.Generator) else list(rng)
-    if len(rngs) != sils.shape[0]:
-        raise InvalidInput(f"rng must be one generator or one per frame ({sils.shape[0]})")
-    out = []
-    for t in range(sils.shape[0]):
-        kp_t = None if keypoints is None else (keypoints[0][t], keypoints[1][t])
-        prev = estimate_candidates(
-            sils[t],
-            edges[t],
-            camera,
-            shape,
-            init[t],
-            settings=settings,
-            rng=rngs[t],
-            prev=prev,
-            keypoints=kp_t,
-        )
-        out.append(prev)
-        if on_progress is not None:
-            on_progress("candidates", (t + 1) / sils.shape[0])
-    return out
+    return int(sils.shape[0])
+
+
+def _first(init: np.ndarray) -> np.ndarray:
+    """The first initial posture (17, 3) of a frame's (17, 3) or (M, 17, 3) ones."""
+    return init if init.ndim == 2 else init[0]

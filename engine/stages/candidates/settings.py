@@ -73,6 +73,10 @@ class CandidateSettings:
     alternatives: int = 0
     alternative_min_deg: float = 3.0
     alternative_share: float = 0.4
+    # key frames (beyond the thesis, issue 25): the full search on key frames only
+    key_gap: int = 1
+    key_motion_deg: float = 4.0
+    between_step0_deg: float = 4.0
 
     @classmethod
     def thesis(cls) -> CandidateSettings:
@@ -129,6 +133,13 @@ class CandidateSettings:
         if self.estimator not in ("bp", "in_plane", "hybrid"):
             raise InvalidInput(
                 f"settings.estimator must be 'bp', 'in_plane' or 'hybrid', got {self.estimator!r}"
+            )
+        if self.key_gap < 1:
+            raise InvalidInput(f"settings.key_gap must be >= 1, got {self.key_gap}")
+        if not (self.key_motion_deg > 0.0 and self.between_step0_deg > 0.0):  # refuses NaN
+            raise InvalidInput(
+                f"settings.key_motion_deg and between_step0_deg must be > 0, got "
+                f"{self.key_motion_deg}, {self.between_step0_deg}"
             )
         if self.n_candidates < 1:
             raise InvalidInput(f"settings.n_candidates must be >= 1, got {self.n_candidates}")
