@@ -84,3 +84,17 @@ def test_a_carried_posture_keeps_the_targets_bones_and_the_deviation(swing):
 def test_bad_key_frame_settings_are_refused(field):
     with pytest.raises(InvalidInput, match=next(iter(field))):
         CandidateSettings(**field).validate()
+
+
+@pytest.mark.parametrize("keys", [[False, True, True], [True, True, False], [True, True]])
+def test_a_chunk_refuses_keys_that_do_not_frame_it(keys):
+    # a frame between key frames needs a key frame on each side within the chunk
+    from engine.stages.candidates import estimate_candidates_chunk
+
+    with pytest.raises(InvalidInput, match="keys must be 3 flags"):
+        estimate_candidates_chunk(
+            np.zeros((3, 8, 8), bool), np.zeros((3, 8, 8), bool),
+            None,  # the keys are checked before anything is estimated
+            BodyShape.default(1.75), np.zeros((3, 17, 3)),
+            rng=np.random.default_rng(0), keys=np.asarray(keys),
+        )  # fmt: skip
