@@ -7,6 +7,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+from numba import njit
 
 from engine.stages.selection.boundaries import _Segmentation
 from engine.stages.selection.evidence import _angles, _Evidence
@@ -52,38 +53,8 @@ def refine_segment(
         l0 = int(np.argmin(d_c[0, 0]))
         return np.zeros(1, dtype=int), np.array([l0]), float(d_c[0, 0, l0])
     diag = np.linspace(0.0, n_r - 1, n_v)
-    t_idx = np.arange(n_r)
-    D = np.full((n_r, k), np.inf)
-    D[0] = d_c[0, 0]
-    back_i = np.zeros((n_v, n_r, k), dtype=np.int32)
-    back_k = np.zeros((n_v, n_r, k), dtype=np.int32)
-    for tp in range(1, n_v):
-        allowed = np.abs(t_idx - diag[tp]) <= band
-        if tp == n_v - 1:
-            allowed = t_idx == n_r - 1
-        cur = d_c[tp]  # (n, K)
-        best = np.full((n_r, k), np.inf)
-        bi = np.zeros((n_r, k), dtype=np.int32)
-        bk = np.zeros((n_r, k), dtype=np.int32)
-        for i in range(min_step, window + 1):
-            if i >= n_r:
-                break
-            prev_D = np.full((n_r, k), np.inf)
-            prev_e = np.zeros((n_r, k))
-            prev_D[i:] = D[: n_r - i]
-            prev_e[i:] = d_c[tp - 1, : n_r - i]
-            # (n, K_prev, K): D(t'-1, t-i, k) + (d_c(t', t, l) - d_c(t'-1, t-i, k))^2
-            with np.errstate(invalid="ignore"):
-                diff = cur[:, None, :] - prev_e[:, :, None]
-            tot = prev_D[:, :, None] + np.where(np.isfinite(diff), diff * diff, np.inf)
-            kk = np.argmin(tot, axis=1)
-            val = np.take_along_axis(tot, kk[:, None, :], 1)[:, 0]
-            better = val < best
-            best = np.where(better, val, best)
-            bi = np.where(better, i, bi)
-            bk = np.where(better, kk, bk)
-        D = np.where(allowed[:, None], best + cur, np.inf)
-        back_i[tp], back_k[tp] = bi, bk
+    D, back_i, back_k = _dp_table(np.ascontiguousarray(d_c, dtype=np.float64), diag,
+                                  int(window), float(band), int(min_step))  # fmt: skip
     l_end = int(np.argmin(D[n_r - 1]))
     cost = float(D[n_r - 1, l_end])
     C = np.empty(n_v, dtype=int)
@@ -93,6 +64,48 @@ def refine_segment(
         i, kk = back_i[tp, C[tp], ell[tp]], back_k[tp, C[tp], ell[tp]]
         C[tp - 1], ell[tp - 1] = C[tp] - i, kk
     return C, ell, cost
+
+
+@njit(cache=True)
+def _dp_table(
+    d_c: np.ndarray, diag: np.ndarray, window: int, band: float, min_step: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The DP of :func:`refine_segment`: the last row's cumulated costs D (n, K) and the
+    back pointers (step i, candidate k), each (n', n, K).
+
+    Compiled: the profile of stage 4 (benchmarks/profile.py) put 90 % of its time in this
+    loop as numpy, which built (n, K, K) arrays for every step i and every reference frame,
+    inside the band or not. Here only the band's frames are visited. Ties go to the smallest
+    step, then the smallest k, as numpy's argmin did.
+    """
+    n_v, n_r, k = d_c.shape
+    D = np.full((n_r, k), np.inf)
+    D[0] = d_c[0, 0]
+    back_i = np.zeros((n_v, n_r, k), dtype=np.int32)
+    back_k = np.zeros((n_v, n_r, k), dtype=np.int32)
+    for tp in range(1, n_v):
+        new = np.full((n_r, k), np.inf)
+        lo, hi = max(0, int(np.ceil(diag[tp] - band))), min(n_r - 1, int(np.floor(diag[tp] + band)))
+        if tp == n_v - 1:  # the path ends at the segment's last reference frame
+            lo = hi = n_r - 1
+        for t in range(lo, hi + 1):
+            for ll in range(k):
+                cur = d_c[tp, t, ll]
+                best, bi, bk = np.inf, 0, 0
+                for i in range(min_step, min(window, n_r - 1) + 1):
+                    if t - i < 0:
+                        break
+                    for kk in range(k):
+                        diff = cur - d_c[tp - 1, t - i, kk]
+                        if not np.isfinite(diff):
+                            continue
+                        tot = D[t - i, kk] + diff * diff
+                        if tot < best:
+                            best, bi, bk = tot, i, kk
+                new[t, ll] = best + cur
+                back_i[tp, t, ll], back_k[tp, t, ll] = bi, bk
+        D = new
+    return D, back_i, back_k
 
 
 def _segment_table(ref_dirs: np.ndarray, cand_dirs: np.ndarray, valid: np.ndarray) -> np.ndarray:

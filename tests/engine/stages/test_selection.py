@@ -158,12 +158,13 @@ def test_very_different_performer_gets_one_overall_message():
     assert any("very different" in m for m in sel.messages)
 
 
-def _brute_force(d_c: np.ndarray, window: int, min_step: int) -> float:
+def _brute_force(d_c: np.ndarray, window: int, min_step: int, band: float = np.inf) -> float:
     n_v, n_r, k = d_c.shape
     best = np.inf
+    diag = np.linspace(0.0, n_r - 1, n_v)
     for steps in itertools.product(range(min_step, window + 1), repeat=n_v - 1):
         C = np.concatenate([[0], np.cumsum(steps)])
-        if C[-1] != n_r - 1:
+        if C[-1] != n_r - 1 or np.any(np.abs(C[1:] - diag[1:]) > band):
             continue
         for ell in itertools.product(range(k), repeat=n_v):
             e = d_c[np.arange(n_v), C, list(ell)]
@@ -187,6 +188,30 @@ def test_dp_equals_brute_force(n_v, n_r, k, window, min_step, seed):
     # the traced path is valid and has that cost
     assert C[0] == 0 and C[-1] == n_r - 1
     assert np.all(np.diff(C) >= min_step) and np.all(np.diff(C) <= window)
+    e = d_c[np.arange(n_v), C, ell]
+    assert e.sum() + (np.diff(e) ** 2).sum() == pytest.approx(cost)
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    n_v=st.integers(2, 5), n_r=st.integers(2, 9), k=st.integers(1, 3), window=st.integers(1, 4),
+    band=st.integers(1, 4), min_step=st.integers(0, 1), seed=st.integers(0, 10_000),
+    absent=st.floats(0.0, 0.3),
+)  # fmt: skip
+def test_dp_in_a_band_with_absent_candidates_equals_brute_force(
+    n_v, n_r, k, window, band, min_step, seed, absent
+):
+    rng = np.random.default_rng(seed)
+    d_c = rng.uniform(0, 1, (n_v, n_r, k))
+    d_c[rng.uniform(size=d_c.shape) < absent] = np.inf
+    C, ell, cost = refine_segment(d_c, window=window, band=band, min_step=min_step)
+    expected = _brute_force(d_c, window, min_step, band)
+    if not np.isfinite(expected):
+        assert not np.isfinite(cost)
+        return
+    assert cost == pytest.approx(expected)
+    diag = np.linspace(0.0, n_r - 1, n_v)
+    assert np.all(np.abs(C[1:] - diag[1:]) <= band)
     e = d_c[np.arange(n_v), C, ell]
     assert e.sum() + (np.diff(e) ** 2).sum() == pytest.approx(cost)
 
