@@ -4,7 +4,8 @@
 Starts the server on a free port with a fresh data dir, uploads the video with the
 development key, polls the analysis every 0.5 s (timing each poll: the API must stay
 responsive while the worker uses every core), and prints the seconds from upload to done and
-the poll latencies.
+the poll latencies. It also asks for the provisional result (the first whole segments, while
+stage 3 runs on the rest) at each poll, and prints when each first came.
 
     .venv/bin/python benchmarks/upload_to_result.py                 # worker concurrency = cores
     .venv/bin/python benchmarks/upload_to_result.py --concurrency 1 # as before issue 25
@@ -28,6 +29,7 @@ def main() -> int:
     ap.add_argument("--concurrency", type=int, default=0, help="worker processes (0: cores)")
     ap.add_argument("--video", type=Path, default=VIDEO)
     ap.add_argument("--timeout", type=float, default=1800)
+    ap.add_argument("--chunks", type=int, default=0, help="stage-3 chunks (0: the default)")
     args = ap.parse_args()
     import httpx
     import numpy as np
@@ -35,6 +37,8 @@ def main() -> int:
     env = dict(os.environ)
     if args.concurrency:
         env["COACH_WORKER_CONCURRENCY"] = str(args.concurrency)
+    if args.chunks:
+        env["COACH_CHUNKS"] = str(args.chunks)
     with tempfile.TemporaryDirectory(prefix="coach-u2r-") as tmp:
         proc, base, key = start_api(Path(tmp), env, rate=1000, worker=True)
         try:
@@ -49,6 +53,7 @@ def main() -> int:
                         files={"video": (args.video.name, fh, "video/mp4")},
                     ).raise_for_status()
                 url, polls, status = f"/api/v1/analyses/{r.json()['id']}", [], "queued"
+                first: dict[int, float] = {}  # segments covered -> seconds after upload
                 while status not in ("done", "failed", "cancelled"):
                     if time.perf_counter() - t0 > args.timeout:
                         raise SystemExit(f"not done after {args.timeout:.0f} s")
@@ -57,6 +62,11 @@ def main() -> int:
                     a = c.get(url).raise_for_status().json()
                     polls.append(1000 * (time.perf_counter() - tp))
                     status = a["status"]
+                    if status == "running":
+                        pr = c.get(url + "/provisional")
+                        if pr.status_code == 200:
+                            k = pr.json()["provisional"]["segments"]
+                            first.setdefault(k, time.perf_counter() - t0)
                 elapsed = time.perf_counter() - t0
         finally:
             stop(proc)
@@ -65,6 +75,10 @@ def main() -> int:
     print(f"{args.video.parent.name}: upload -> {status} in {elapsed:.1f} s "
           f"(embedded worker, {workers} processes); status polls during the analysis: "
           f"p50 {p50:.1f} ms, p95 {p95:.1f} ms over {len(polls)}")  # fmt: skip
+    for k, seconds in sorted(first.items()):
+        print(f"  first {k} segment(s) on the page after {seconds:.1f} s")
+    if not first:
+        print("  no provisional result before the final one")
     return 0 if status == "done" else 1
 
 

@@ -11,7 +11,7 @@ service keeps them in the analysis folder and a worker on another machine picks 
 from __future__ import annotations
 
 import os
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
@@ -199,6 +199,26 @@ class Prepared:
         idx = np.asarray(frames)
         return readings(self.keypoints[idx], self.keypoint_confidence[idx],
                         self.keypoint_offsets)  # fmt: skip
+
+    def head(self, n_frames: int, segments: Segments) -> Prepared:
+        """The first ``n_frames`` video frames only, against the reference ``segments``
+        (a leading part of :attr:`segments`): what a provisional stage 4 sees
+        (:mod:`engine.provisional`)."""
+        if not 1 <= n_frames <= self.n_frames:
+            raise InvalidInput(f"n_frames must be in [1, {self.n_frames}], got {n_frames}")
+        cut = slice(0, n_frames)
+
+        def part(a: np.ndarray | None) -> np.ndarray | None:
+            return None if a is None else a[cut]
+
+        return replace(
+            self, silhouettes=self.silhouettes[cut], edges=self.edges[cut], C=self.C[cut],
+            rotations=self.rotations[cut], flags=self.flags[cut], segments=segments,
+            keypoints=part(self.keypoints), keypoint_confidence=part(self.keypoint_confidence),
+            video=replace(self.video, frames=n_frames, file_frames=self.video.file_frames
+                          or self.video.offset + self.video.frames),
+            repetitions=(),
+        )  # fmt: skip
 
     def save(self, path: PathLike) -> None:
         if self.domain is not None and self.domain.doc is None:

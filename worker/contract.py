@@ -120,6 +120,8 @@ class AnalysisFolder:
                           "updated": iso time}, replaced atomically on every change
         video.<ext>      the performer's upload, as the app stored it
         result.json      the DESIGN.md result, present once the analysis is done
+        provisional.json the same for the first whole segments only, with a "provisional"
+                         entry (engine.provisional), written while stage 3 runs on the rest
         cancel           marker: the analysis was cancelled (or failed for good): messages
                          still queued for it stop
         tasks.json       the Celery task ids of the analysis' canvas
@@ -145,6 +147,7 @@ class AnalysisFolder:
         self.work_dir = Path(work_dir)
         self.status = self.work_dir / "status.json"
         self.result = self.work_dir / "result.json"
+        self.provisional = self.work_dir / "provisional.json"
         self.cancel = self.work_dir / "cancel"
         self.tasks = self.work_dir / "tasks.json"
         self.heartbeat = self.work_dir / "heartbeat"

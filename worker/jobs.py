@@ -44,6 +44,7 @@ from types import ModuleType
 from typing import Any
 
 from engine import pipeline as engine_pipeline
+from engine import provisional as engine_provisional
 from engine.errors import EngineError
 from engine.reference.domain import Domain
 from engine.settings import Settings
@@ -107,11 +108,16 @@ def write_json_atomic(path: str | os.PathLike, data: Any) -> Path:
     return write_atomic(path, write)
 
 
-def read_status(work_dir: str | os.PathLike) -> dict | None:
+def read_json(path: Path) -> Any:
+    """The JSON document at ``path``; None while it is missing or half-written."""
     try:
-        return json.loads(AnalysisFolder(work_dir).status.read_text())
+        return json.loads(path.read_text())
     except (OSError, ValueError):
         return None
+
+
+def read_status(work_dir: str | os.PathLike) -> dict | None:
+    return read_json(AnalysisFolder(work_dir).status)
 
 
 def write_status(
@@ -366,6 +372,8 @@ def _candidates(
     chunk = pipeline.candidates(prepared, frames, settings, on_progress=progress)
     check_cancel(job)
     write_atomic(out, chunk.save)
+    if pipeline is engine_pipeline:  # a stand-in pipeline of the tests has no stage 4 to run
+        write_provisional(job, n_chunks, prepared, settings)
     _stage_done(
         job,
         "candidates",
@@ -374,6 +382,43 @@ def _candidates(
         frames=f"{frames.start}-{frames.stop}",
     )
     return out
+
+
+#: A provisional result is worth its stage-4 run only while at least this share of the video's
+#: frames still waits for stage 3; nearer the end the final result is about to come.
+PROVISIONAL_MIN_LEFT = 0.25
+
+
+def write_provisional(
+    job: AnalysisJob, n_chunks: int, prepared: Any, settings: Settings
+) -> Path | None:
+    """Stage 4 on the whole segments the finished chunks cover -> ``provisional.json``
+    (:func:`engine.provisional.select_provisional`), when they cover more segments than the
+    one already written and the final result is not near. Never fails the chunk: the
+    provisional result is a preview, and the final one does not depend on it."""
+    paths = AnalysisFolder(job.work_dir)
+    try:
+        done = [p for p in paths.chunks(n_chunks) if p.exists()]
+        chunks = [engine_pipeline.CandidateChunk.load(p) for p in done]
+        n_done = engine_provisional.finished_prefix(prepared, chunks)
+        k, n = engine_provisional.covered_segments(prepared, n_done)
+        if paths.result.exists() or n_done > (1 - PROVISIONAL_MIN_LEFT) * prepared.n_frames:
+            return None
+        old = read_json(paths.provisional)
+        if k == 0 or (old is not None and old["provisional"]["segments"] >= k):
+            return None
+        started = time.monotonic()
+        doc = engine_provisional.select_provisional(prepared, chunks, settings)
+        if doc is None:
+            return None
+        doc.setdefault("analysis_id", job.analysis_id)
+        write_json_atomic(paths.provisional, doc)
+    except Exception as exc:  # noqa: BLE001 - logged; the chunk's own output is written
+        log_event("analysis.provisional_failed", analysis_id=job.analysis_id, error=repr(exc))
+        return None
+    log_event("analysis.provisional", analysis_id=job.analysis_id, segments=k, frames=n,
+              seconds=round(time.monotonic() - started, 2))  # fmt: skip
+    return paths.provisional
 
 
 def run_select(

@@ -9,7 +9,7 @@ COACH_BROKER_URL           ``embedded`` (default): kombu's filesystem transport 
                            broker URL such as ``redis://redis:6379/0``
 COACH_RESULT_BACKEND       default: ``file://$COACH_DATA_DIR/celery/results`` when embedded,
                            the broker URL when it is Redis
-COACH_CHUNKS               stage-3 chunks per analysis when the settings do not say (4)
+COACH_CHUNKS               stage-3 chunks per analysis when the settings do not say (8)
 COACH_VISIBILITY_TIMEOUT_S Redis visibility timeout, seconds (7200): when Redis hands an
                            unacknowledged message out again by itself; the API's recovery
                            (``app.core.recovery``) acts long before, on the heartbeat
@@ -97,7 +97,10 @@ class WorkerSettings:
     data_dir: Path
     broker_url: str
     result_backend: str
-    chunks: int = 4
+    # More chunks than cores, so chunks finish one after another from the start of the video
+    # and the first segments' provisional result comes early (benchmarks/README.md, "First
+    # results"): on P2 8 chunks gave it 12 s before the final result, 4 none, at the same total.
+    chunks: int = 8
     visibility_timeout_s: int = 7200
     restore_interval_s: int = 60
     heartbeat_s: float = 5.0
@@ -163,7 +166,7 @@ class WorkerSettings:
                     f"COACH_{key}_HARD_S ({hard}) must exceed COACH_{key}_SOFT_S ({soft})"
                 )
             limits[stage] = (soft, hard)
-        chunks = _env_int(env, "COACH_CHUNKS", 4)
+        chunks = _env_int(env, "COACH_CHUNKS", 8)
         if chunks < 1:
             raise ValueError(f"COACH_CHUNKS must be >= 1, got {chunks}")
         heartbeat = _env_float(env, "COACH_HEARTBEAT_S", 5.0)

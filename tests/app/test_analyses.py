@@ -217,6 +217,29 @@ def test_progress_is_reflected_and_result_is_409_until_done(client, club_ref, qu
     assert client.get(url, headers=h).json()["status"] == "done"
 
 
+def test_the_first_segments_show_while_the_analysis_runs(client, club_ref, queue, video_file):
+    a = upload(client, club_ref, video_file).json()
+    work = queue.jobs[0].work_dir
+    url, h = f"/api/v1/analyses/{a['id']}/provisional", club_ref.headers
+    r = client.get(url, headers=h)
+    assert r.status_code == 409 and r.json()["error"]["code"] == "not_ready"
+    status(work, "running", 0.6, stage="candidates")
+    assert client.get(url, headers=h).status_code == 409  # no whole segment done yet
+    covered = {"frames": 71, "video_frames": 137, "segments": 1, "reference_segments": 3}
+    write_atomic(Path(work) / "provisional.json", RESULT | {"provisional": covered})
+    got = client.get(url, headers=h).json()
+    assert got["provisional"] == covered
+    (seg,) = got["segments"]
+    assert seg["worst_bone"] == "left forearm" and seg["performer_end"] == 70
+    write_atomic(Path(work) / "provisional.json", {"frames": "half-written"})
+    r = client.get(url, headers=h)
+    assert r.status_code == 500 and r.json()["error"]["code"] == "bad_result"
+    write_atomic(Path(work) / "result.json", RESULT)
+    status(work, "done", 1.0, stage="select")
+    r = client.get(url, headers=h)
+    assert r.status_code == 409 and r.json()["error"]["code"] == "done"
+
+
 def test_failed_status_is_reflected(client, club_ref, queue, video_file):
     a = upload(client, club_ref, video_file).json()
     write_atomic(

@@ -4,6 +4,10 @@ while the real embedded worker runs, and two attempts of one performer side by s
 from __future__ import annotations
 
 import io
+import json
+import os
+import signal
+import time
 from pathlib import Path
 
 import numpy as np
@@ -157,4 +161,56 @@ def test_two_attempts_side_by_side(server, browser, clip, clip_result, shots):
         "() => document.getElementById('cmp-summary').textContent.includes('worse')"
     )
     assert f"a={after}" in page.url and f"b={before}" in page.url
+    ctx.close()
+
+
+def _frozen_worker(work_dir: Path, timeout_s: float = 120.0) -> int:
+    """Wait for the worker to write the provisional result, then stop its process group
+    (SIGSTOP: a worker that is slow to finish the rest); returns the group to continue."""
+    deadline = time.monotonic() + timeout_s
+    while not (work_dir / "provisional.json").exists():
+        assert time.monotonic() < deadline, "no provisional result was written"
+        assert not (work_dir / "result.json").exists(), "the final result came first"
+        time.sleep(0.02)
+    owner = json.loads((work_dir / "heartbeat").read_text())
+    group = os.getpgid(int(owner["pid"]))
+    os.killpg(group, signal.SIGSTOP)
+    return group
+
+
+def test_the_first_segments_show_before_the_analysis_ends(server, browser, long_clip, shots):
+    ctx = browser.new_context(viewport={"width": 1280, "height": 1100})
+    page = ctx.new_page()
+    sign_in(page, server.url, "olive@example.com")
+    r = page.request.post(
+        f"{server.url}/api/v1/analyses",
+        multipart={
+            "video": {"name": "swing.mp4", "mimeType": "video/mp4",
+                      "buffer": long_clip.read_bytes()},
+            "reference_id": str(server.reference_id),
+        },
+    )  # fmt: skip
+    assert r.status == 201, r.text()
+    aid = r.json()["id"]
+    from app import crud
+
+    with server.sessions()() as s:
+        work_dir = Path(crud.get_analysis(s, club_id=server.club_id, analysis_id=aid).work_dir)
+    page.goto(f"{server.url}/analyses/{aid}")
+    group = _frozen_worker(work_dir)
+    try:
+        assert not (work_dir / "result.json").exists()
+        page.wait_for_selector("#first-results:not([hidden]) .seg-card", timeout=20_000)
+        note = page.locator("#first-results-note").inner_text()
+        assert "Provisional" in note and "3 segments" in note, note
+        assert "analysed (frames 0–" in note, note
+        cards = page.locator("#first-cards .seg-card")
+        assert 1 <= cards.count() < 3
+        assert "°" in cards.first.inner_text() and "Tempo" in cards.first.inner_text()
+        page.locator("#progress-view").screenshot(path=str(shots / "first-results.png"))
+    finally:
+        os.killpg(group, signal.SIGCONT)
+    page.wait_for_selector("#analysis[data-ready=true]", timeout=120_000)
+    assert page.locator("#progress-view").is_hidden()
+    assert page.locator("#segment-cards .seg-card").count() > cards.count()
     ctx.close()

@@ -29,6 +29,7 @@
   const STAGE_TEXT = {
     queued: "Waiting for a free worker",
     prepare: "Preparing",
+    perception: "Finding your body and joints",
     foreground: "Separating you from the background",
     calibration: "Calibrating the camera",
     alignment: "Matching your timing to the expert's",
@@ -56,6 +57,47 @@
     $("cancel").hidden = !(a.status === "queued" || a.status === "running");
     // The live 3D view exists once stage 2 has aligned the expert: ask for it only then.
     if (a.status === "running" && LIVE_STAGES.indexOf(a.stage) >= 0) followLive();
+    if (a.status === "running" && a.stage === "candidates") followFirstResults();
+  }
+  // While stage 3 works on the rest of the video, stage 4 runs on the segments it has
+  // finished (engine/provisional.py): their cards show here until the final result.
+  let firstTimer = null, firstShown = 0;
+  function followFirstResults() {
+    if (firstTimer) return;
+    async function step() {
+      try {
+        const p = await coach.api(base + "/provisional");
+        if (p.provisional.segments === firstShown) return;
+        firstShown = p.provisional.segments;
+        const k = p.provisional.segments, of = p.provisional.reference_segments;
+        $("first-results-note").textContent = (k === 1 ? "The first of " + of + " segments is" : "The first " + k + " of " + of + " segments are") +
+          " analysed (frames 0–" + (p.provisional.frames - 1) + " of " + p.provisional.video_frames +
+          "). Provisional: the figures may change a little when the whole video is done.";
+        const box = $("first-cards");
+        box.textContent = "";
+        p.segments.forEach(function (s) {
+          const card = coach.el("div", { class: "seg-card provisional" }, [
+            coach.el("h3", { text: s.name }),
+            coach.el("span", { class: "score", text: deg(s.score != null ? s.score : s.mean_error_deg) }),
+            coach.el("span", { class: "muted", text: "frames " + s.performer_start + "–" + s.performer_end }),
+            coach.el("span", { text: "Tempo: " + s.tempo_text }),
+            coach.el("ul", {}, s.worst_bones.map(function (wb) { return coach.el("li", { text: wb[0] + ": " + deg(wb[1]) }); })),
+          ]);
+          card.style.borderLeftColor = coach.errorColor(s.mean_error_deg);
+          box.append(card);
+        });
+        $("first-results").hidden = false;
+      } catch (e) {
+        if (e.status !== 409) stopFirstResults();  // 409: no whole segment yet, or done
+      }
+    }
+    firstTimer = setInterval(step, 2000);
+    step();
+  }
+  function stopFirstResults() {
+    if (firstTimer) { clearInterval(firstTimer); firstTimer = null; }
+    $("first-cards").textContent = "";  // the final cards replace them
+    $("first-results").hidden = true;
   }
   const LIVE_STAGES = ["candidates", "select", "selection"];
   // While it runs, the 3D view fills in: the aligned expert after stage 2, the best candidate
@@ -94,6 +136,7 @@
   }
   function finished(status) {
     stopLive();
+    stopFirstResults();
     if (status === "done") { $("progress-view").hidden = true; loadResults(); }
     else { $("stage-message").textContent = "The analysis " + status + "."; $("cancel").hidden = true; }
   }
@@ -523,7 +566,7 @@
   }
   function markSegment() {
     if (!summary) return;
-    document.querySelectorAll(".seg-card").forEach(function (c) {
+    document.querySelectorAll("#segment-cards .seg-card").forEach(function (c) {
       const s = summary.segments[+c.dataset.index];
       c.classList.toggle("current", frame + first >= s.performer_start && frame + first <= s.performer_end);
     });

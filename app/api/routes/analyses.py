@@ -44,7 +44,7 @@ from app.schemas import (
     SegmentsPublic,
 )
 from worker.contract import AnalysisFolder, AnalysisJob
-from worker.engine_surface import ONE_CAMERA_NOTE, InvalidInput
+from worker.engine_surface import ONE_CAMERA_NOTE, InvalidInput, Result
 
 log = logging.getLogger("app.analyses")
 
@@ -319,6 +319,37 @@ def read_result(
         frame.pop("candidates", None)
         frame.pop("selected", None)
     return JSONResponse(doc)
+
+
+@router.get(
+    "/{analysis_id}/provisional",
+    summary="The first segments' results while the analysis still runs",
+    description="Stage 4 on the whole segments whose frames are done, written while stage 3 "
+    "works on the rest: the `/summary` of those segments, plus `provisional` (`frames` and "
+    "`segments` covered, of `video_frames` and `reference_segments`). The final result may "
+    "move the last covered boundary by a frame or two. 409 `not_ready` until a first "
+    "segment is done, `done` once the final result is there (read `/summary`). "
+    + ONE_CAMERA_NOTE,
+    responses=errors(404, 409),
+)
+def read_provisional(
+    analysis_id: str, who: CurrentPrincipal, session: SessionDep, notifier: NotifierDep
+) -> dict[str, Any]:
+    analysis = analysis_for(session, who, analysis_id)
+    reflect(session, analysis, on_final=notifier)
+    if analysis.status == "done":
+        raise ApiError(409, "done", "the final result is ready: read /summary")
+    doc = Storage.read_json(AnalysisFolder(analysis.work_dir).provisional)
+    if doc is None or analysis.status != "running":
+        raise ApiError(
+            409, "not_ready", "no whole segment has been analysed yet",
+            {"status": analysis.status, "progress": analysis.progress},
+        )  # fmt: skip
+    try:
+        result = Result.from_dict(doc)
+    except InvalidInput as exc:
+        raise ApiError(500, "bad_result", f"the provisional result is malformed ({exc})") from None
+    return summary.page_summary(analysis, result) | {"provisional": doc["provisional"]}
 
 
 @router.get(

@@ -1,0 +1,54 @@
+"""The worker writes the first segments' results while stage 3 still runs (real engine)."""
+
+from __future__ import annotations
+
+import json
+import logging
+
+import pytest
+
+from tests.engine.test_pipeline import SETTINGS, case_dir  # noqa: F401 - the case fixture
+from tests.engine.test_provisional import DOMAIN
+from worker import jobs
+from worker.contract import AnalysisFolder, AnalysisJob
+
+
+@pytest.fixture
+def job(case_dir, tmp_path) -> AnalysisJob:  # noqa: F811
+    return AnalysisJob(
+        analysis_id="p1", reference_path=str(case_dir["reference"]),
+        video_path=str(case_dir["video"]), work_dir=str(tmp_path / "analysis"),
+        settings=SETTINGS, domain=DOMAIN,
+    )  # fmt: skip
+
+
+def test_the_first_segment_is_written_before_the_last_chunk_runs(job, caplog) -> None:
+    caplog.set_level(logging.INFO, logger=jobs.log.name)
+    paths = AnalysisFolder(job.work_dir)
+    jobs.start(job)
+    jobs.run_prepare(job)
+    seen = []
+    for i in range(4):
+        jobs.run_candidates(job, i, 4)
+        seen.append(jobs.read_json(paths.provisional))
+    assert seen[0] is None, "chunk 0 ends before the first segment does"
+    doc = seen[1]
+    assert doc is not None and doc["analysis_id"] == "p1"
+    assert doc["provisional"]["segments"] == 1 and doc["provisional"]["reference_segments"] == 2
+    assert doc["provisional"]["frames"] < doc["provisional"]["video_frames"]
+    assert [s["name"] for s in doc["segments"]] == ["down"]
+    assert seen[3] == doc, "near the end no new provisional result is computed"
+    assert "analysis.provisional " in caplog.text
+    final = json.loads(jobs.run_select(job, 4).read_text())
+    assert len(final["segments"]) == 2 and "provisional" not in final
+
+
+def test_a_broken_chunk_file_costs_the_preview_not_the_chunk(job, caplog) -> None:
+    caplog.set_level(logging.INFO, logger=jobs.log.name)
+    paths = AnalysisFolder(job.work_dir)
+    jobs.start(job)
+    jobs.run_prepare(job)
+    paths.chunk(0, 4).write_bytes(b"not an npz")
+    out = jobs.run_candidates(job, 1, 4)
+    assert out.exists() and not paths.provisional.exists()
+    assert "analysis.provisional_failed" in caplog.text
