@@ -40,6 +40,7 @@ from engine.stages.assessment import (
     add_uncertainty,
     assess_fit,
     flag_image_misfit,
+    note_framing,
     note_repetitions,
 )
 from engine.stages.calibration import (
@@ -52,6 +53,7 @@ from engine.stages.calibration import (
 from engine.stages.candidates import estimate_candidates_chunk, frame_rngs
 from engine.stages.candidates.key_frames import choose_key_frames, key_span
 from engine.stages.foreground import ForegroundResult, extract_foreground, outline
+from engine.stages.framing import first_frame_problems
 from engine.stages.perception import (
     Perception,
     calibration_keypoints,
@@ -139,7 +141,17 @@ def prepare(
         keypoint_offsets=None if perception is None else r.keypoint_offsets,
         perception_model="" if perception is None else perception.model,
         repetitions=r.repetitions,  # found only in a whole video: its frames are the file's
+        framing=_first_frame_framing(perception, int(w), int(h)),
     )  # fmt: skip
+
+
+def _first_frame_framing(perception: Perception | None, width: int, height: int) -> tuple[str, ...]:
+    """:func:`first_frame_problems` of the analysed part's first frame; none without the
+    pose model's landmarks."""
+    if perception is None or perception.landmarks is None or perception.n_frames == 0:
+        return ()
+    return first_frame_problems(perception.landmarks[0], bool(perception.detected[0]),
+                                width, height)  # fmt: skip
 
 
 def candidates(
@@ -302,6 +314,7 @@ def select(
     chosen = np.stack([c[int(k)] for c, k in zip(cands, selection.selected, strict=True)])
     assess_fit(doc, chosen, prepared, sel_settings)
     note_repetitions(doc, prepared.repetitions)
+    note_framing(doc, prepared.framing)
     return doc
 
 

@@ -139,6 +139,9 @@ class Prepared:
     repetitions : tuple of dict
         Whole performances of the reference the video holds when several
         (:attr:`Stages02.repetitions`), in the file's frames; empty otherwise.
+    framing : tuple of str
+        What the first analysed frame says about the filming, one sentence each
+        (:func:`engine.stages.framing.first_frame_problems`); empty when it looks right.
     """
 
     reference_path: str
@@ -163,6 +166,7 @@ class Prepared:
     keypoint_offsets: np.ndarray | None = None
     perception_model: str = ""
     repetitions: tuple[dict, ...] = ()
+    framing: tuple[str, ...] = ()
 
     @property
     def n_frames(self) -> int:
@@ -247,6 +251,7 @@ class Prepared:
             "flags": [list(f) for f in self.flags], "timing_s": self.timing_s,
             "perception_model": self.perception_model,
             "repetitions": [dict(r) for r in self.repetitions],
+            "framing": list(self.framing),
         }  # fmt: skip
         save_arrays(path, arrays, meta)
 
@@ -272,6 +277,7 @@ class Prepared:
             keypoint_offsets=a.get("keypoint_offsets"),
             perception_model=str(m.get("perception_model", "")),
             repetitions=tuple(m.get("repetitions", ())),
+            framing=tuple(str(x) for x in m.get("framing", ())),
         )  # fmt: skip
 
 

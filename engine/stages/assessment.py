@@ -160,6 +160,18 @@ def note_repetitions(doc: dict, repetitions: Sequence[dict]) -> None:
     ]
 
 
+def note_framing(doc: dict, problems: Sequence[str]) -> None:
+    """Add what the video's first frame says about the filming (:attr:`Prepared.framing`)
+    to the result's messages: the upload page says it before an upload where the browser can
+    decode the video; the result says it for every video."""
+    if problems:
+        doc["summary"]["messages"] = [
+            *doc["summary"]["messages"],
+            *(p if "first frame" in p else f"At the start of the video, {p[0].lower()}{p[1:]}"
+              for p in problems),
+        ]
+
+
 def _repetitions(prepared: Prepared) -> list[dict]:
     """The repetitions of the reference's motion the keypoints show, when more than one
     (:func:`engine.stages.repetitions.excursions`): video frames and seconds; none when the

@@ -122,5 +122,24 @@ def framing_of(landmarks: np.ndarray | None, faces: np.ndarray) -> Framing:
     return Framing(True, out, share, people, tuple(problems))
 
 
+def first_frame_problems(
+    landmarks: np.ndarray | None, detected: bool, width: int, height: int
+) -> tuple[str, ...]:
+    """What the analysed video's first frame says about the filming, from the perception
+    step's landmarks of that frame (33, 2+) in pixels of a ``width`` x ``height`` picture.
+
+    The same check as the upload page's (:func:`framing_of`), done again by the engine for
+    the videos a browser cannot decode and for uploads through the API. Without the face
+    detector it cannot tell whether someone else is in view. None for landmarks means the
+    model gives none (an older stored stage): nothing to say.
+    """
+    if landmarks is None:
+        return ()
+    if not detected:
+        return framing_of(None, np.zeros((0, 2))).problems
+    lm = np.asarray(landmarks, float)[:, :2] / np.array([width, height], float)
+    return framing_of(lm, np.zeros((0, 2))).problems
+
+
 def _words(parts: tuple[str, ...]) -> str:
     return parts[0] if len(parts) == 1 else ", ".join(parts[:-1]) + " and " + parts[-1]

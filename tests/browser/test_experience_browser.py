@@ -195,4 +195,10 @@ def test_the_upload_page_checks_the_first_frame_before_uploading(server, browser
     assert "out of the picture" in check.inner_text()
     assert page.get_by_role("button", name="Upload and analyse").is_enabled()  # a warning only
     page.locator("main").screenshot(path=str(shots / "upload-framing-check.png"))
+    # A video this browser cannot decode is left to the engine's own first-frame check.
+    opaque = tmp_path / "opaque.mp4"
+    opaque.write_bytes(b"\x00\x00\x00\x18ftypmp42" + bytes(range(256)) * 64)
+    page.set_input_files("#video", str(opaque))
+    page.wait_for_selector("#framing-check[data-state=undecodable]", timeout=20_000)
+    assert "checked once it is uploaded" in check.inner_text()
     ctx.close()

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -75,11 +77,24 @@ def _same(a, b) -> None:
     for f in ("keypoints", "keypoint_confidence"):
         np.testing.assert_array_equal(getattr(a, f), getattr(b, f), err_msg=f)
     assert a.perception_model == b.perception_model
+    assert a.framing == b.framing
 
 
 def test_prepared_round_trip(prepared, tmp_path) -> None:
     prepared.save(tmp_path / "prepared.npz")
     _same(prepared, Prepared.load(tmp_path / "prepared.npz"))
+    assert prepared.framing == ()  # the synthetic performer is whole and large in the picture
+
+
+def test_what_the_first_frame_shows_reaches_the_result(prepared, tmp_path) -> None:
+    cut = dataclasses.replace(prepared, framing=("Your feet are out of the picture: step back.",))
+    cut.save(tmp_path / "prepared.npz")
+    back = Prepared.load(tmp_path / "prepared.npz")
+    _same(cut, back)
+    doc = select(back, [candidates(back, range(back.n_frames), S)], S)
+    assert doc["summary"]["messages"][-1] == (
+        "At the start of the video, your feet are out of the picture: step back."
+    )
 
 
 def test_initial_postures_are_the_turned_and_the_plain_reference(prepared) -> None:

@@ -122,7 +122,8 @@
 
   // The filming check: the chosen video's first frame goes to the API as a picture before
   // anything is uploaded; what to change shows at once. A warning, never a block. Videos
-  // this browser cannot decode (e.g. HEVC in some browsers) are simply not checked here.
+  // this browser cannot decode (e.g. HEVC in some browsers) are checked by the engine instead:
+  // the result's messages say what the first frame shows (engine/stages/framing.py).
   const check = document.getElementById("framing-check");
   let checking = 0;
   function firstFrame(f) {
@@ -150,7 +151,14 @@
     check.textContent = "Checking how the video is filmed…";
     try {
       const data = new FormData();
-      data.append("frame", await firstFrame(f), "first-frame.jpg");
+      let picture;
+      try { picture = await firstFrame(f); } catch (e) {
+        if (mine !== checking) return;
+        check.className = "framing"; check.dataset.state = "undecodable";
+        check.textContent = "This browser cannot show this video, so its first frame is checked once it is uploaded: the result will say if something about the filming should change.";
+        return;
+      }
+      data.append("frame", picture, "first-frame.jpg");
       const r = await coach.api("/api/v1/framing", { method: "POST", body: data });
       if (mine !== checking) return;  // another video was chosen meanwhile
       check.textContent = "";

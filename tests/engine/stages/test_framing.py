@@ -7,7 +7,13 @@ import pytest
 
 from engine.errors import InvalidInput
 from engine.io.video import read_video
-from engine.stages.framing import MIN_BODY_SHARE, check_framing, framing_of
+from engine.stages.assessment import note_framing
+from engine.stages.framing import (
+    MIN_BODY_SHARE,
+    check_framing,
+    first_frame_problems,
+    framing_of,
+)
 from tests.conftest import SHARED
 
 SQUAT = SHARED / "data" / "real" / "squat_front_5fps.mp4"
@@ -56,6 +62,24 @@ def test_nobody_found():
     assert not f.person_found and "No one was found" in f.problems[0]
 
 
+def test_the_engine_checks_the_first_frame_again_in_pixels():
+    px = _standing(0.3, 1.2) * np.array([640.0, 360.0])  # the feet below a 640 x 360 picture
+    assert "Your feet are out" in first_frame_problems(px, True, 640, 360)[0]
+    assert first_frame_problems(_standing() * np.array([640.0, 360.0]), True, 640, 360) == ()
+    assert "No one was found" in first_frame_problems(px, False, 640, 360)[0]
+    assert first_frame_problems(None, True, 640, 360) == ()  # a stage stored without landmarks
+
+
+def test_the_result_says_what_the_first_frame_showed():
+    doc = {"summary": {"messages": ["Segment 2 seems to be missing."]}}
+    note_framing(doc, framing_of(_standing(0.3, 1.2), np.zeros((0, 2))).problems)
+    first, framing = doc["summary"]["messages"]
+    assert first == "Segment 2 seems to be missing."
+    assert framing.startswith("At the start of the video, your feet are out of the picture")
+    note_framing(doc, framing_of(None, np.zeros((0, 2))).problems)
+    assert doc["summary"]["messages"][-1].startswith("No one was found in the first frame")
+
+
 def test_the_model_on_a_real_clip_whole_cut_and_empty():
     frame = read_video(SQUAT, height=0, max_frames=2).frames[0]
     whole = check_framing(frame)
@@ -64,6 +88,19 @@ def test_the_model_on_a_real_clip_whole_cut_and_empty():
     assert "feet" in cut.out_of_view, cut
     empty = check_framing(np.full((240, 320, 3), 128, np.uint8))
     assert not empty.person_found
+
+
+def test_the_perception_steps_landmarks_tell_the_same_as_the_upload_check():
+    """The engine's check reads the landmarks the analysis already has, in working pixels."""
+    from engine.stages.perception import perceive
+
+    frames = read_video(SQUAT, height=240, max_frames=2).frames
+    cut = np.ascontiguousarray(frames[:, : int(0.6 * frames.shape[1])])
+    for video, feet_out in ((frames, False), (cut, True)):
+        p = perceive(video)
+        h, w = video.shape[1:3]
+        problems = first_frame_problems(p.landmarks[0], bool(p.detected[0]), w, h)
+        assert any("feet" in x for x in problems) == feet_out, problems
 
 
 def test_not_a_picture_is_refused():
