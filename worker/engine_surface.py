@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 
 # Bones, joints and their names for people (DESIGN.md "Skeleton").
 from engine.body.limits import JOINT_ANGLES, joint_angles_deg
+from engine.body.posture_angles import POSTURE_ANGLES, posture_angles_deg
 from engine.body.skeleton import (
     BEND_LABELS,
     BONE_CHILD,
@@ -74,6 +75,7 @@ __all__ = [
     "ERROR_RED_DEG",
     "JOINTS",
     "JOINT_ANGLES",
+    "POSTURE_ANGLES",
     "MISFIT_RGB",
     "ONE_CAMERA_NOTE",
     "SD_FLOOR_DEG",
@@ -94,6 +96,7 @@ __all__ = [
     "draw_skeleton",
     "error_colors",
     "joint_angles_deg",
+    "posture_angles_deg",
     "load_candidate_chunk",
     "load_prepared",
     "load_reference",

@@ -23,6 +23,7 @@ from worker.engine_surface import (
     BONE_NAMES,
     BONE_PARENT,
     JOINT_ANGLES,
+    POSTURE_ANGLES,
     InvalidInput,
     Result,
     ResultFrame,
@@ -30,6 +31,7 @@ from worker.engine_surface import (
     as_result,
     bone_label,
     joint_angles_deg,
+    posture_angles_deg,
     tempo_words,
 )
 
@@ -175,15 +177,25 @@ def bend_angles(result: Result, reference_joints: np.ndarray) -> dict[str, Any]:
     dict
         ``bends``: per bend its ``label`` ("left knee") and ``joint`` (where it is, a joint
         index of the data contract); ``performer`` and ``expert``: (frames, bends) degrees.
+        ``posture``: the labels of :data:`POSTURE_ANGLES` (spine tilt from the vertical,
+        shoulder and hip turn since the first frame), and ``performer_posture`` and
+        ``expert_posture``: (frames, 4) degrees, each body against its own first frame (the
+        expert's at the moment matched to the performer's first frame).
     """
     ref = np.asarray(reference_joints, float)
     frames = np.clip([f.reference_frame for f in result.frames], 0, len(ref) - 1)
     none = np.zeros((0, len(JOINT_ANGLES)))
     perf = joint_angles_deg(result.joints_3d) if result.frames else none
     expert = joint_angles_deg(ref[frames]) if result.frames else none
+    stand = np.zeros((0, len(POSTURE_ANGLES)))
+    perf_stand = posture_angles_deg(result.joints_3d) if result.frames else stand
+    expert_stand = posture_angles_deg(ref[frames]) if result.frames else stand
     return {
         "bends": [{"label": BEND_LABELS[b], "joint": int(BONE_PARENT[b])}
                   for _, _, b in JOINT_ANGLES],
         "performer": np.round(perf, 1).tolist(),
         "expert": np.round(expert, 1).tolist(),
+        "posture": [{"label": label} for label in POSTURE_ANGLES],
+        "performer_posture": np.round(perf_stand, 1).tolist(),
+        "expert_posture": np.round(expert_stand, 1).tolist(),
     }  # fmt: skip

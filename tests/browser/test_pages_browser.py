@@ -273,6 +273,12 @@ def test_clicking_a_joint_reads_its_bend_for_the_performer_and_the_expert(
     assert page.locator("#angle-readout").inner_text().startswith(
         f"you {js_round(angles['performer'][3][1])}°"
     )
+    # and how the body stands there: spine tilt, shoulder and hip turn, yours and the expert's
+    you, them = angles["performer_posture"][3], angles["expert_posture"][3]
+    stand = page.locator("#posture-readout").inner_text()
+    assert stand.startswith(f"Spine {js_round(abs(you[0]))}° "), stand
+    assert f"shoulders turned {js_round(abs(you[2]))}° (expert {js_round(abs(them[2]))}°)" in stand
+    assert f"hips turned {js_round(abs(you[3]))}° (expert {js_round(abs(them[3]))}°)" in stand
     page.locator(".video-wrap").screenshot(path=str(shots / "joint-angle.png"))
     ctx.close()
 

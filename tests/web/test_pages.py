@@ -329,6 +329,7 @@ def test_each_joints_bend_the_performers_and_the_experts(env):
     import numpy as np
 
     from app.models import Reference
+    from engine.body.posture_angles import posture_angles_deg
 
     app, client, ids, _, settings = env
     aid = add_done(app, settings, ids, ids["perf"])
@@ -347,4 +348,11 @@ def test_each_joints_bend_the_performers_and_the_experts(env):
     ref = media.reference_joints(bvh)
     idx = [min(f["reference_frame"], len(ref) - 1) for f in doc["frames"]]
     np.testing.assert_allclose(d["expert"], media.joint_angles_deg(ref[idx]), atol=0.06)
+    # the spine's tilt and the shoulders' and hips' turn, each body against its first frame
+    assert [p["label"] for p in d["posture"]] == [
+        "spine forward tilt", "spine side tilt", "shoulder turn", "hip turn"]
+    perf = np.array([f["joints_3d"] for f in doc["frames"]])
+    np.testing.assert_allclose(d["performer_posture"], posture_angles_deg(perf), atol=0.06)
+    np.testing.assert_allclose(d["expert_posture"], posture_angles_deg(ref[idx]), atol=0.06)
+    assert np.allclose(d["performer_posture"][0][2:], 0.0)  # no turn at the first frame
     assert client.get(f"/api/v1/analyses/{theirs}/angles").status_code == 404

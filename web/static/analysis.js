@@ -465,12 +465,26 @@
     angles.bends.forEach(function (b, k) {
       sel.append(coach.el("option", { value: String(k), text: capital(b.label) }));
     });
+    showPosture();
   }
   function angleBend() {
     const k = $("angle-joint").value;
     return angles && k !== "" ? Object.assign({ index: +k }, angles.bends[+k]) : null;
   }
+  // How the body stands: the spine's tilt from the vertical and the shoulders' and hips'
+  // turn since the first frame, yours and the expert's (API /angles, engine/body/posture_angles.py).
+  function showPosture() {
+    const out = $("posture-readout");
+    if (!angles || !angles.performer_posture || outside || !angles.performer_posture[frame]) { out.textContent = ""; return; }
+    const you = angles.performer_posture[frame], them = angles.expert_posture[frame];
+    const tilt = function (v, pos, neg) { return Math.round(Math.abs(v)) + "° " + (v >= 0 ? pos : neg); };
+    out.textContent = "Spine " + tilt(you[0], "forward", "back") + " (expert " + tilt(them[0], "forward", "back") + "), " +
+      tilt(you[1], "to the left", "to the right") + " (expert " + tilt(them[1], "to the left", "to the right") + ") · " +
+      "shoulders turned " + Math.round(Math.abs(you[2])) + "° (expert " + Math.round(Math.abs(them[2])) + "°) · " +
+      "hips turned " + Math.round(Math.abs(you[3])) + "° (expert " + Math.round(Math.abs(them[3])) + "°), since the first frame";
+  }
   function showAngle() {
+    showPosture();
     const out = $("angle-readout"), b = angleBend();
     if (!b || outside) { out.textContent = ""; return; }
     const you = angles.performer[frame][b.index], them = angles.expert[frame][b.index];
