@@ -166,6 +166,27 @@ def reference_joints(path: str | Path) -> np.ndarray:
     return _reference_joints(p, os.path.getmtime(p))
 
 
+def reference_motion_curve(
+    path: str | Path, first_frame: int = 0, max_points: int = 1000
+) -> dict[str, Any]:
+    """How fast the expert's hands move over the reference, for placing its segment
+    boundaries on a plot: the wrists' mean speed relative to the hip, m/s, per frame
+    (averaged into at most ``max_points`` points; ``step`` frames each). Frames up to the
+    motion's ``first_frame`` read 0: a conversion T-pose before it is not motion."""
+    joints = reference_joints(path)
+    rel = joints[:, [JOINTS.index("l_wrist"), JOINTS.index("r_wrist")]] - joints[:, :1]
+    speed = np.r_[0.0, np.linalg.norm(np.diff(rel, axis=0), axis=-1).mean(-1)]  # m per frame
+    speed[: first_frame + 1] = 0.0
+    step = max(1, -(-len(speed) // max_points))
+    pad = (-len(speed)) % step
+    binned = np.r_[speed, np.full(pad, speed[-1])].reshape(-1, step).mean(-1)
+    return {
+        "frames": int(len(speed)),
+        "step": int(step),
+        "speed_m_per_frame": np.round(binned, 5).tolist(),
+    }
+
+
 def skeleton_svg(postures: np.ndarray, *, height: int = 120, label: str = "") -> str:
     """Front view (x right, y up) of postures (N, 17, 3) side by side, as a small SVG."""
     postures = np.asarray(postures, float).reshape(-1, len(JOINTS), 3)

@@ -74,6 +74,45 @@ def test_detected_segments_are_stored_when_the_domain_gives_none(client, club, b
     assert r.json()["derived"]["segments"] == [*seg.starts, seg.end]
 
 
+def test_a_coach_moves_adds_and_resets_segment_boundaries(client, club, bvh_file):
+    from engine.io.bvh import load_reference
+    from engine.reference.boundaries import reference_boundaries
+
+    ref = _upload(client, club, bvh_file).json()
+    url, h = f"/api/v1/references/{ref['id']}", club.headers
+    curve = client.get(url + "/motion.json", headers=h).json()
+    assert curve["frames"] == ref["derived"]["frames"] == 580 and curve["step"] == 1
+    speed = curve["speed_m_per_frame"]
+    assert len(speed) == 580 and max(speed) > 0
+    # frames up to the motion's first (after a conversion T-pose) are not motion
+    assert curve["first_motion_frame"] == 1 and speed[:2] == [0.0, 0.0]
+    assert curve["segments"] == ref["derived"]["segments"]
+    r = client.put(
+        url + "/domain",
+        headers=h,
+        json={"segments": [1, 150, 300], "segment_names": ["a", "b", "c"]},
+    )
+    assert r.status_code == 200, r.text
+    got = r.json()
+    assert got["derived"]["segments"] == [1, 150, 300, 579]
+    assert got["domain"]["segments"] == [1, 150, 300] and got["segment_names"] == ["a", "b", "c"]
+    assert client.get(url + "/motion.json", headers=h).json()["segments"] == [1, 150, 300, 579]
+    # names that no longer match, or a start beyond the motion, are refused and change nothing
+    bad = client.put(
+        url + "/domain", headers=h, json={"segments": [1, 300], "segment_names": ["a", "b", "c"]}
+    )
+    assert bad.status_code == 422 and "2 segments" in bad.json()["error"]["message"]
+    beyond = client.put(url + "/domain", headers=h, json={"segments": [1, 9000]})
+    assert beyond.status_code == 422 and beyond.json()["error"]["code"] == "invalid_domain"
+    assert client.get(url, headers=h).json()["derived"]["segments"] == [1, 150, 300, 579]
+    # [] goes back to the boundaries found in the motion
+    back = client.put(url + "/domain", headers=h, json={"segments": []}).json()
+    seg = reference_boundaries(load_reference(bvh_file).motion)
+    assert (
+        back["derived"]["segments"] == [*seg.starts, seg.end] and "segments" not in back["domain"]
+    )
+
+
 def test_other_clubs_reference_is_404(client, app, club_ref):
     other = make_club(app, "beta")
     url = f"/api/v1/references/{club_ref.reference_id}"

@@ -493,3 +493,55 @@ def test_one_repetition_of_several_is_shown_where_it_is_in_the_video(server, bro
     record = page.evaluate("async (u) => (await fetch(u)).json()", f"/api/v1/analyses/{new_id}")
     assert (record["frames_start"], record["frames_end"]) == (12, 20)
     page.evaluate("async (u) => fetch(u, {method: 'DELETE'})", f"/api/v1/analyses/{new_id}")
+
+
+def test_a_coach_sets_segment_boundaries_on_the_plot(server, browser, shots):
+    """Drag a boundary on the expert's hand-speed plot, nudge it with the keys, add one,
+    save: the reference's segments are the ones shown; then back to the detected ones."""
+    from tests.conftest import CMU
+
+    ctx = browser.new_context(viewport={"width": 1280, "height": 900})
+    page = ctx.new_page()
+    sign_in(page, server.url, COACH[0], COACH[1])
+    page.goto(f"{server.url}/references")
+    page.wait_for_selector(".ref-card")
+    page.locator("#ref-upload").get_by_label("Name", exact=True).fill("Boundaries swing")
+    page.get_by_label("BVH file").set_input_files(str(CMU / "64_29.bvh"))
+    page.get_by_role("button", name="Upload reference").click()
+    card = page.locator(".ref-card", has_text="Boundaries swing")
+    card.locator(".boundary-plot polyline").wait_for(timeout=30_000)
+    rid = card.get_attribute("aria-labelledby").removeprefix("ref").removesuffix("-h")
+    url = f"{server.url}/api/v1/references/{rid}"
+    before = page.request.get(url).json()["derived"]["segments"]
+    assert len(before) == 4  # 64_29: three detected segments, then the last frame
+    line = card.locator('.boundary[data-index="1"] line')
+    line.scroll_into_view_if_needed()
+    box = line.bounding_box()
+    page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    page.mouse.down()
+    page.mouse.move(box["x"] + 40, box["y"] + box["height"] / 2, steps=5)
+    page.mouse.up()
+    page.keyboard.press("ArrowRight")
+    page.keyboard.press("ArrowRight")
+    card.get_by_role("button", name="Add a boundary").click()
+    shown = card.locator(".boundary-text").inner_text()
+    starts = [int(v) for v in shown.split("frames ")[1].split(" (")[0].split(", ")]
+    # the dragged boundary moved right, and the new one splits the longest segment before it
+    assert len(starts) == 4 and starts[2] > before[1] + 2, (shown, before)
+    assert starts[1] == int((before[0] + starts[2]) / 2 + 0.5) and starts[3] == before[2]
+    assert card.locator("textarea").input_value().count("\n") == 3  # four names, one new
+    card.get_by_role("button", name="Save").click()
+    card.get_by_text("Saved.").wait_for()
+    ref = page.request.get(url).json()
+    assert ref["derived"]["segments"] == [*starts, before[-1]]
+    assert len(ref["segment_names"]) == 4
+    page.locator(".ref-card", has_text="Boundaries swing").screenshot(
+        path=str(shots / "reference-boundaries.png")
+    )
+    card = page.locator(".ref-card", has_text="Boundaries swing")
+    card.get_by_role("button", name="Use the detected boundaries").click()
+    card.get_by_role("button", name="Save").click()
+    card.get_by_text("Saved.").wait_for()
+    assert page.request.get(url).json()["derived"]["segments"] == before
+    page.request.delete(url)
+    ctx.close()

@@ -57,6 +57,121 @@
     ]);
   }
 
+  // Segment boundaries on a plot of the expert's hand speed: drag a boundary (or focus it and
+  // use the arrow keys, Shift for 10 frames), add one in the longest segment, remove the
+  // selected one, or go back to the boundaries detected in the motion (API motion.json).
+  const SVGNS = "http://www.w3.org/2000/svg";
+  function svg(tag, attrs) {
+    const e = document.createElementNS(SVGNS, tag);
+    Object.keys(attrs || {}).forEach(function (k) { e.setAttribute(k, attrs[k]); });
+    return e;
+  }
+  function boundaryEditor(r, segInput) {
+    const W = 600, H = 110, T = 8, B = 18;
+    const state = { starts: (r.derived.segments || []).slice(0, -1), end: (r.derived.segments || []).slice(-1)[0], changed: false, reset: false, selected: -1, curve: null };
+    const plot = svg("svg", { viewBox: "0 0 " + W + " " + H, class: "boundary-plot", role: "group", "aria-label": "Segment boundaries of " + r.name + " over the expert's hand speed" });
+    const text = coach.el("p", { class: "muted boundary-text", "aria-live": "polite" });
+    const add = coach.el("button", { type: "button", text: "Add a boundary" });
+    const remove = coach.el("button", { type: "button", text: "Remove the selected boundary", disabled: "" });
+    const detected = coach.el("button", { type: "button", text: "Use the detected boundaries" });
+    const frames = function () { return state.curve ? state.curve.frames : (state.end || 0) + 1; };
+    const x = function (f) { return W * f / Math.max(frames() - 1, 1); };
+    function fitNames() {  // as many names as segments: keep the coach's, name the new ones
+      const names = segInput.value.split("\n").map(function (v) { return v.trim(); }).filter(Boolean);
+      const n = state.starts.length;
+      while (names.length < n) names.push("segment " + (names.length + 1));
+      segInput.value = names.slice(0, n).join("\n");
+    }
+    function draw() {
+      plot.textContent = "";
+      if (state.curve) {
+        // the scale ignores the fastest 1 % of points, so one jerk does not flatten the rest
+        const c = state.curve, v = c.speed_m_per_frame;
+        const top = v.slice().sort(function (a, b) { return a - b; })[Math.floor(0.99 * (v.length - 1))] || 1;
+        const pts = v.map(function (s, i) { return x(i * c.step).toFixed(1) + "," + (T + (H - T - B) * (1 - Math.min(s / top, 1))).toFixed(1); });
+        plot.append(svg("polyline", { points: pts.join(" "), fill: "none", stroke: "#8792a2", "stroke-width": 1.2 }));
+      }
+      const names = segInput.value.split("\n").map(function (v) { return v.trim(); }).filter(Boolean);
+      state.starts.forEach(function (f, i) {
+        const next = i + 1 < state.starts.length ? state.starts[i + 1] : state.end;
+        const label = svg("text", { x: (x(f) + x(next)) / 2, y: H - 4, "text-anchor": "middle", "font-size": 11, fill: "#5c6675" });
+        label.textContent = names[i] || "segment " + (i + 1);
+        plot.append(label);
+        if (i === 0) return;  // the motion's start is not a boundary
+        const g = svg("g", { class: "boundary" + (i === state.selected ? " selected" : ""), tabindex: 0, role: "slider",
+          "aria-label": "Start of " + (names[i] || "segment " + (i + 1)), "aria-valuenow": f, "aria-valuemin": state.starts[i - 1] + 1, "aria-valuemax": next - 1, "data-index": i });
+        g.append(svg("rect", { x: x(f) - 6, y: 0, width: 12, height: H - B, fill: "transparent" }),
+          svg("line", { x1: x(f), x2: x(f), y1: 0, y2: H - B, stroke: i === state.selected ? "#3b5bdb" : "#c92a2a", "stroke-width": 2 }));
+        plot.append(g);
+      });
+      text.textContent = "Segments start at frames " + state.starts.join(", ") + " (of " + frames() + ")" + (state.changed ? "; not saved yet." : ".");
+      remove.disabled = state.selected < 1;
+    }
+    function move(i, f) {
+      const lo = state.starts[i - 1] + 1, hi = (i + 1 < state.starts.length ? state.starts[i + 1] : state.end) - 1;
+      state.starts[i] = Math.max(lo, Math.min(hi, Math.round(f)));
+      state.changed = true; state.reset = false; state.selected = i;
+      draw();
+    }
+    let dragging = -1;
+    plot.addEventListener("pointerdown", function (ev) {
+      const g = ev.target.closest && ev.target.closest(".boundary");
+      if (!g) return;
+      dragging = +g.dataset.index; state.selected = dragging;
+      plot.setPointerCapture(ev.pointerId);
+      draw();
+    });
+    plot.addEventListener("pointermove", function (ev) {
+      if (dragging < 0) return;
+      const pt = plot.createSVGPoint();  // the pointer in the plot's own units (viewBox)
+      pt.x = ev.clientX; pt.y = ev.clientY;
+      move(dragging, pt.matrixTransform(plot.getScreenCTM().inverse()).x / W * (frames() - 1));
+    });
+    plot.addEventListener("pointerup", function () {
+      const i = dragging;
+      dragging = -1;
+      if (i > 0) { const g = plot.querySelector('.boundary[data-index="' + i + '"]'); if (g) g.focus(); }
+    });
+    plot.addEventListener("keydown", function (ev) {
+      const g = ev.target.closest && ev.target.closest(".boundary");
+      if (!g || ["ArrowLeft", "ArrowRight"].indexOf(ev.key) < 0) return;
+      ev.preventDefault();
+      const i = +g.dataset.index;
+      move(i, state.starts[i] + (ev.key === "ArrowRight" ? 1 : -1) * (ev.shiftKey ? 10 : 1));
+      plot.querySelector('.boundary[data-index="' + i + '"]').focus();
+    });
+    add.addEventListener("click", function () {
+      const ends = state.starts.slice(1).concat([state.end]);
+      let best = 0;
+      ends.forEach(function (e, i) { if (e - state.starts[i] > ends[best] - state.starts[best]) best = i; });
+      if (ends[best] - state.starts[best] < 2) return;
+      state.starts.splice(best + 1, 0, Math.round((state.starts[best] + ends[best]) / 2));
+      state.changed = true; state.reset = false; state.selected = best + 1;
+      fitNames(); draw();
+    });
+    remove.addEventListener("click", function () {
+      if (state.selected < 1) return;
+      state.starts.splice(state.selected, 1);
+      state.changed = true; state.reset = false; state.selected = -1;
+      fitNames(); draw();
+    });
+    detected.addEventListener("click", function () {
+      state.reset = true; state.changed = true; state.selected = -1;
+      segInput.value = "";  // their number is the motion's: name them again after saving
+      text.textContent = "The boundaries found in the motion are used once you save; name their segments again then.";
+    });
+    segInput.addEventListener("input", draw);
+    coach.api("/api/v1/references/" + r.id + "/motion.json").then(function (c) { state.curve = c; draw(); }).catch(function () { draw(); });
+    draw();
+    return {
+      el: coach.el("div", { class: "boundary-editor" }, [
+        coach.el("p", { text: "Segment boundaries (drag a red line, or focus it and use the arrow keys):" }),
+        plot, text, coach.el("div", { class: "row" }, [add, remove, detected])]),
+      // for PUT /domain: null keeps the stored boundaries, [] goes back to the detected ones
+      segments: function () { return !state.changed ? null : (state.reset ? [] : state.starts.slice()); },
+    };
+  }
+
   function card(r) {
     const dom = r.domain || {};
     const id = "ref" + r.id;
@@ -74,8 +189,10 @@
       grid.append(coach.el("label", { for: id + "-w" + b, text: label }), w, t);
     });
     const status = coach.el("p", { class: "saved", role: "status" });
+    const bounds = boundaryEditor(r, segInput);
     const f = coach.el("form", { class: "stack", "aria-label": "Edit " + r.name }, [
       coach.el("label", { for: id + "-name", text: "Name" }), nameInput,
+      bounds.el,
       coach.el("label", { for: id + "-segs", text: "Segment names (" + (r.segment_names.length ? r.segment_names.length + " segments, " : "") + "one a line, in order)" }), segInput,
       coach.el("label", { for: id + "-dtol", text: "Default tolerance (degrees)" }), dflt,
       coach.el("details", {}, [coach.el("summary", { text: "Per-bone weights and tolerances" }), grid]),
@@ -88,10 +205,21 @@
       f.querySelectorAll("input.w").forEach(function (i) { if (i.value !== "" && +i.value !== 1) weights[i.dataset.bone] = +i.value; });
       f.querySelectorAll("input.t").forEach(function (i) { if (i.value !== "") tols[i.dataset.bone] = +i.value; });
       try {
-        await coach.api("/api/v1/references/" + r.id + "/domain", { method: "PUT", json: {
+        const segments = bounds.segments();
+        const body = {
           name: nameInput.value.trim() || null,
           segment_names: segInput.value.split("\n").map(function (s) { return s.trim(); }).filter(Boolean),
-          bone_weights: weights, tolerances_deg: tols, default_tolerance_deg: +dflt.value || 0 } });
+          bone_weights: weights, tolerances_deg: tols, default_tolerance_deg: +dflt.value || 0 };
+        if (segments !== null) body.segments = segments;
+        const saved = await coach.api("/api/v1/references/" + r.id + "/domain", { method: "PUT", json: body });
+        if (segments !== null) {  // new boundaries: redraw the card (strip, plot) from the stored ones
+          const fresh = card(saved);
+          const strip = fresh.querySelector("img");
+          if (strip) strip.src = saved.strip + (saved.strip.indexOf("?") < 0 ? "?" : "&") + "s=" + saved.derived.segments.join("-");
+          fresh.querySelector("p.saved").textContent = "Saved.";
+          f.closest(".ref-card").replaceWith(fresh);
+          return;
+        }
         status.className = "saved"; status.textContent = "Saved.";
       } catch (e) { status.className = "error"; status.textContent = e.message; }
     });

@@ -237,17 +237,28 @@ def update_domain(
         tolerances_deg=body.tolerances_deg,
         default_tolerance_deg=body.default_tolerance_deg,
     )
+    if body.segments:
+        config["segments"] = sorted(set(body.segments))
+    elif body.segments is not None:  # [] : the boundaries detected from the motion again
+        config.pop("segments", None)
     try:
         config = validation.parse_domain(json.dumps(config).encode())
     except InvalidInput as exc:
         raise ApiError(422, "invalid_domain", str(exc)) from None
-    n = len((ref.derived or {}).get("segments") or []) - 1  # boundaries: n + 1 frames
+    derived = dict(ref.derived or {})
+    if body.segments is not None:  # the boundaries move: the motion says where they may go
+        try:
+            found = validation.inspect_reference(Path(ref.bvh_path), config)
+        except InvalidInput as exc:
+            raise ApiError(422, "invalid_domain", str(exc)) from None
+        derived["segments"] = found["segments"]
+    n = len(derived.get("segments") or []) - 1  # boundaries: n + 1 frames
     if config["segment_names"] and n > 0 and len(config["segment_names"]) != n:
         raise ApiError(
             422, "invalid_domain",
             f"the reference has {n} segments, got {len(config['segment_names'])} names",
         )  # fmt: skip
-    ref.domain_config = config
+    ref.domain_config, ref.derived = config, derived
     if body.name:
         ref.name = body.name
     session.commit()
@@ -295,6 +306,24 @@ async def reference_preview(reference_id: DbId, who: CurrentPrincipal, session: 
         fps=float(derived.get("fps") or 0.0),
     )  # fmt: skip
     return JSONResponse(data, headers=_PICTURE_HEADERS)
+
+
+@router.get(
+    "/{reference_id}/motion.json",
+    summary="The expert's hand speed per frame and the segment boundaries, to edit them",
+    description="`speed_m_per_frame`: the wrists' mean speed relative to the hip, averaged "
+    "over `step` frames per point; `segments`: each segment's first frame, then the last "
+    "frame. Set new starts with `PUT /domain` (`segments`).",
+    responses=errors(404),
+)
+async def reference_motion(reference_id: DbId, who: CurrentPrincipal, session: SessionDep):
+    ref = reference_for(session, who, reference_id)
+    derived = ref.derived or {}
+    first = int(derived.get("first_motion_frame") or 0)
+    data = await run_in_threadpool(media.reference_motion_curve, ref.bvh_path, first)
+    data |= {"fps": float(derived.get("fps") or 0.0), "first_motion_frame": first,
+             "segments": list(derived.get("segments") or [])}  # fmt: skip
+    return JSONResponse(data)  # not cached: the boundaries change with PUT /domain
 
 
 @router.delete(
