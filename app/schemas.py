@@ -295,6 +295,11 @@ class DomainUpdate(BaseModel):
     bone_weights: dict[str, float] = Field(default={}, max_length=32)
     tolerances_deg: dict[str, float] = Field(default={}, max_length=32)
     default_tolerance_deg: float = Field(default=0.0, ge=0, le=180)
+    #: The moments between segments, by name: each segment's start, then the last one's end
+    #: (empty: named after the segments).
+    key_position_names: list[Annotated[str, Field(min_length=1, max_length=100)]] = Field(
+        default=[], max_length=65
+    )
     #: The segments' first frames (reference frames, the first the motion's start); None
     #: keeps the present boundaries, [] goes back to the detected ones.
     segments: list[Annotated[int, Field(ge=0, le=10_000_000)]] | None = Field(

@@ -145,14 +145,20 @@ def page_summary(analysis: Analysis, result: Result) -> dict[str, Any]:
         "performer": analysis.performer.display_name,
         "bone_labels": list(BONE_LABELS),
         "segments": out,
-        "key_positions": key_positions(out),
+        "key_positions": key_positions(
+            out, (analysis.reference.domain_config or {}).get("key_position_names") or ()
+        ),
     }
 
 
-def key_positions(segments: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
-    """The moments between the reference's segments, named by them: "start of backswing"
-    (with segments named address, backswing, downswing: the top of the backswing) and the
-    last one's end; each with the performer's video frame and the expert's frame."""
+def key_positions(
+    segments: Sequence[Mapping[str, Any]], names: Sequence[str] = ()
+) -> list[dict[str, Any]]:
+    """The moments between the reference's segments (each start, then the last one's end),
+    each with the performer's video frame and the expert's frame. Named by the coach's
+    ``names`` ("address", "top", "impact") when there is one per moment, else by the
+    segments: "start of backswing" (with segments named address, backswing, downswing: the
+    top of the backswing), "end of downswing"."""
     out = [
         {"name": f"start of {s['name']}", "frame": s["performer_start"],
          "reference_frame": s["reference_start"]}
@@ -162,6 +168,9 @@ def key_positions(segments: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]
         last = segments[-1]
         out.append({"name": f"end of {last['name']}", "frame": last["performer_end"],
                     "reference_frame": last["reference_end"]})  # fmt: skip
+    if len(names) == len(out):
+        for k, name in zip(out, names, strict=True):
+            k["name"] = name
     return out
 
 

@@ -12,6 +12,8 @@ stance is both fine). They change the *reported score* only, never the raw error
       "sport": "golf",
       "segment_names": ["address", "takeaway", "top", "downswing", "impact", "finish"],
       "segments": [1, 60, 130, 170, 190, 215],
+      "key_position_names": ["address", "takeaway", "top", "transition", "impact", "finish",
+                             "end"],
       "bone_weights": {"hip->lower_chest": 3, "l_elbow": 2},
       "tolerances_deg": {"l_knee": 15, "r_knee": 15},
       "default_tolerance_deg": 0,
@@ -25,6 +27,10 @@ the file's frames); the last segment ends at the motion's last frame. Without it
 boundaries are detected from the ``boundary`` joints' direction changes (thesis 5.4.2), and
 ``segment_names`` must then name as many segments as are detected (``coach reference inspect
 REF.bvh`` prints them).
+
+``key_position_names`` (optional) names the moments between segments, which a coach reviews
+("address", "top", "impact"): one per segment start, then the last segment's end. Without
+them they are called after the segments ("start of downswing").
 
 ``variation`` (optional, written by ``coach reference build`` from several takes, seed 002)
 gives the expert's own spread of every bone at every reference frame (one row of 16 per frame
@@ -55,6 +61,7 @@ GOLF_SEGMENT_NAMES = ("address", "takeaway", "top", "downswing", "impact", "fini
 _KEYS = {
     "version", "sport", "segment_names", "bone_weights", "tolerances_deg",
     "default_tolerance_deg", "boundary", "notes", "segments", "variation",
+    "key_position_names",
 }  # fmt: skip
 _VARIATION_KEYS = {"bone_sd_deg", "sd_floor_deg", "z_limit", "takes", "median_take"}
 
@@ -70,6 +77,8 @@ class Domain:
         One per reference segment, or empty to keep the reference's own names.
     segment_starts : tuple of int
         The coach's own segment starts (reference frames), or empty to detect them.
+    key_position_names : tuple of str
+        The moments at each segment's start and at the last one's end, or empty.
     bone_weights : ndarray, shape (16,)
         Non-negative, at least one positive.
     tolerances : ndarray, shape (16,)
@@ -93,6 +102,7 @@ class Domain:
     sport: str = ""
     segment_names: tuple[str, ...] = ()
     segment_starts: tuple[int, ...] = ()
+    key_position_names: tuple[str, ...] = ()
     bone_weights: np.ndarray = field(default_factory=lambda: np.ones(N_BONES))
     tolerances: np.ndarray = field(default_factory=lambda: np.zeros(N_BONES))
     boundary_joints: tuple[str, ...] = ()
@@ -143,6 +153,7 @@ class Domain:
             "sport": self.sport,
             "segment_names": list(self.segment_names),
             "segment_starts": list(self.segment_starts),
+            "key_position_names": list(self.key_position_names),
             "bone_weights": [float(w) for w in self.bone_weights],
             "tolerances_deg": [float(t) for t in np.degrees(self.tolerances)],
             "boundary_joints": list(self.boundary_joints),
@@ -218,11 +229,13 @@ def parse_domain(doc: Any, *, n_segments: int | None = None, source: str = "doma
     if not isinstance(sport, str):
         raise InvalidInput(f"{source}.sport: expected a string")
     names, starts = _segments(doc, source, n_segments)
+    keys = _key_positions(doc, source, len(starts) or len(names) or n_segments)
     weights, tolerances = _bone_numbers(doc, source)
     joints, change = _boundary(doc.get("boundary", {}), f"{source}.boundary")
     sd, floor, z_limit = _variation(doc.get("variation"), f"{source}.variation")
     return Domain(
-        sport=sport, segment_names=names, segment_starts=starts, bone_weights=weights,
+        sport=sport, segment_names=names, segment_starts=starts, key_position_names=keys,
+        bone_weights=weights,
         tolerances=tolerances, boundary_joints=joints, direction_change_deg=change,
         bone_sd=sd, sd_floor=floor, z_limit=z_limit, doc=dict(doc),
     )  # fmt: skip
@@ -295,6 +308,20 @@ def _segments(
             f"got {len(names)} names"
         )
     return tuple(names), tuple(starts)
+
+
+def _key_positions(doc: dict, source: str, n_segments: int | None) -> tuple[str, ...]:
+    """``key_position_names``: one per segment start and one for the end, when the number of
+    segments is known (0 or None: not yet)."""
+    keys = doc.get("key_position_names", [])
+    if not isinstance(keys, list) or not all(isinstance(n, str) and n for n in keys):
+        raise InvalidInput(f"{source}.key_position_names: expected a list of non-empty strings")
+    if keys and n_segments and len(keys) != n_segments + 1:
+        raise InvalidInput(
+            f"{source}.key_position_names: {n_segments} segments have {n_segments + 1} key "
+            f"positions (each start, then the end), got {len(keys)} names"
+        )
+    return tuple(keys)
 
 
 def _bone_numbers(doc: dict, source: str) -> tuple[np.ndarray, np.ndarray]:

@@ -414,7 +414,7 @@ def test_coach_dashboard_and_references(server, browser, clip, clip_result, shot
     page.screenshot(path=str(shots / "references.png"), full_page=True)
     page.reload()
     page.wait_for_selector(".ref-card")
-    saved = page.locator(".ref-card", has_text="Second swing").locator("textarea")
+    saved = page.locator(".ref-card", has_text="Second swing").get_by_label("Segment names")
     assert "backswing" in saved.input_value()
     # Delete, after a confirmation: the demo reference has analyses and stays, with the reason
     demo = page.locator(".ref-card", has_text="CMU 64_29 (golf swing)")
@@ -523,18 +523,22 @@ def test_a_coach_sets_segment_boundaries_on_the_plot(server, browser, shots):
     page.mouse.up()
     page.keyboard.press("ArrowRight")
     page.keyboard.press("ArrowRight")
+    card.get_by_label("Key positions").fill("address\ntop\nimpact\nfinish")
     card.get_by_role("button", name="Add a boundary").click()
     shown = card.locator(".boundary-text").inner_text()
     starts = [int(v) for v in shown.split("frames ")[1].split(" (")[0].split(", ")]
     # the dragged boundary moved right, and the new one splits the longest segment before it
     assert len(starts) == 4 and starts[2] > before[1] + 2, (shown, before)
     assert starts[1] == int((before[0] + starts[2]) / 2 + 0.5) and starts[3] == before[2]
-    assert card.locator("textarea").input_value().count("\n") == 3  # four names, one new
+    assert card.get_by_label("Segment names").input_value().count("\n") == 3  # four, one new
     card.get_by_role("button", name="Save").click()
     card.get_by_text("Saved.").wait_for()
     ref = page.request.get(url).json()
     assert ref["derived"]["segments"] == [*starts, before[-1]]
     assert len(ref["segment_names"]) == 4
+    # the key positions followed: a new one where the boundary was added
+    assert ref["domain"]["key_position_names"] == ["address", "key position 2", "top", "impact",
+                                                   "finish"]  # fmt: skip
     page.locator(".ref-card", has_text="Boundaries swing").screenshot(
         path=str(shots / "reference-boundaries.png")
     )

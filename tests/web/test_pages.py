@@ -234,6 +234,22 @@ def test_comments_pinned_and_persisted(env):
     assert client.get(base).json()["total"] == 1
 
 
+def test_key_positions_take_the_coachs_names(env):
+    app, client, ids, _, settings = env
+    aid = add_done(app, settings, ids, ids["perf"])
+    sign_in(client, "c@a.org")
+    url = f"/api/v1/references/{ids['ref']}/domain"
+    bad = client.put(url, json={"key_position_names": ["address", "top"]})
+    assert bad.status_code == 422 and "2 segments have 3 key positions" in bad.text
+    r = client.put(url, json={"key_position_names": ["address", "top", "finish"]})
+    assert r.status_code == 200, r.text
+    keys = client.get(f"/api/v1/analyses/{aid}/summary").json()["key_positions"]
+    assert [k["name"] for k in keys] == ["address", "top", "finish"]
+    client.put(url, json={"key_position_names": []})  # back to the segments' own words
+    keys = client.get(f"/api/v1/analyses/{aid}/summary").json()["key_positions"]
+    assert keys[1]["name"] == "start of segment 2"
+
+
 def test_reference_thumbnail_and_domain_edit(env):
     _, client, ids, _, settings = env
     sign_in(client, "c@a.org")

@@ -66,7 +66,8 @@
     Object.keys(attrs || {}).forEach(function (k) { e.setAttribute(k, attrs[k]); });
     return e;
   }
-  function boundaryEditor(r, segInput) {
+  function lines(input) { return input.value.split("\n").map(function (v) { return v.trim(); }).filter(Boolean); }
+  function boundaryEditor(r, segInput, keyInput) {
     const W = 600, H = 110, T = 8, B = 18;
     const state = { starts: (r.derived.segments || []).slice(0, -1), end: (r.derived.segments || []).slice(-1)[0], changed: false, reset: false, selected: -1, curve: null };
     const plot = svg("svg", { viewBox: "0 0 " + W + " " + H, class: "boundary-plot", role: "group", "aria-label": "Segment boundaries of " + r.name + " over the expert's hand speed" });
@@ -147,17 +148,21 @@
       if (ends[best] - state.starts[best] < 2) return;
       state.starts.splice(best + 1, 0, Math.round((state.starts[best] + ends[best]) / 2));
       state.changed = true; state.reset = false; state.selected = best + 1;
+      const keys = lines(keyInput);  // the coach's key positions follow their boundaries
+      if (keys.length) { keys.splice(best + 1, 0, "key position " + (best + 2)); keyInput.value = keys.join("\n"); }
       fitNames(); draw();
     });
     remove.addEventListener("click", function () {
       if (state.selected < 1) return;
+      const keys = lines(keyInput);
+      if (keys.length) { keys.splice(state.selected, 1); keyInput.value = keys.join("\n"); }
       state.starts.splice(state.selected, 1);
       state.changed = true; state.reset = false; state.selected = -1;
       fitNames(); draw();
     });
     detected.addEventListener("click", function () {
       state.reset = true; state.changed = true; state.selected = -1;
-      segInput.value = "";  // their number is the motion's: name them again after saving
+      segInput.value = ""; keyInput.value = "";  // their number is the motion's: name them again after saving
       text.textContent = "The boundaries found in the motion are used once you save; name their segments again then.";
     });
     segInput.addEventListener("input", draw);
@@ -189,11 +194,14 @@
       grid.append(coach.el("label", { for: id + "-w" + b, text: label }), w, t);
     });
     const status = coach.el("p", { class: "saved", role: "status" });
-    const bounds = boundaryEditor(r, segInput);
+    const keyInput = coach.el("textarea", { id: id + "-keys", rows: 3 });
+    keyInput.value = (dom.key_position_names || []).join("\n");
+    const bounds = boundaryEditor(r, segInput, keyInput);
     const f = coach.el("form", { class: "stack", "aria-label": "Edit " + r.name }, [
       coach.el("label", { for: id + "-name", text: "Name" }), nameInput,
       bounds.el,
       coach.el("label", { for: id + "-segs", text: "Segment names (" + (r.segment_names.length ? r.segment_names.length + " segments, " : "") + "one a line, in order)" }), segInput,
+      coach.el("label", { for: id + "-keys", text: "Key positions (optional: the moment at each segment's start, then the last one's end, one a line; e.g. address, top, impact, finish)" }), keyInput,
       coach.el("label", { for: id + "-dtol", text: "Default tolerance (degrees)" }), dflt,
       coach.el("details", {}, [coach.el("summary", { text: "Per-bone weights and tolerances" }), grid]),
       coach.el("button", { type: "submit", class: "primary", text: "Save" }), status,
@@ -208,7 +216,7 @@
         const segments = bounds.segments();
         const body = {
           name: nameInput.value.trim() || null,
-          segment_names: segInput.value.split("\n").map(function (s) { return s.trim(); }).filter(Boolean),
+          segment_names: lines(segInput), key_position_names: lines(keyInput),
           bone_weights: weights, tolerances_deg: tols, default_tolerance_deg: +dflt.value || 0 };
         if (segments !== null) body.segments = segments;
         const saved = await coach.api("/api/v1/references/" + r.id + "/domain", { method: "PUT", json: body });

@@ -236,6 +236,7 @@ def update_domain(
         bone_weights=body.bone_weights,
         tolerances_deg=body.tolerances_deg,
         default_tolerance_deg=body.default_tolerance_deg,
+        key_position_names=[s.strip() for s in body.key_position_names],
     )
     if body.segments:
         config["segments"] = sorted(set(body.segments))
@@ -257,6 +258,13 @@ def update_domain(
         raise ApiError(
             422, "invalid_domain",
             f"the reference has {n} segments, got {len(config['segment_names'])} names",
+        )  # fmt: skip
+    keys = config["key_position_names"]
+    if keys and n > 0 and len(keys) != n + 1:
+        raise ApiError(
+            422, "invalid_domain",
+            f"the reference's {n} segments have {n + 1} key positions (each start, then the "
+            f"end), got {len(keys)} names",
         )  # fmt: skip
     ref.domain_config, ref.derived = config, derived
     if body.name:

@@ -72,11 +72,21 @@ def test_score_changes_but_raw_errors_do_not():
         ({"segments": [5, 5]}, "increasing"),
         ({"segments": [-1, 5]}, "segments"),
         ({"segments": [1, 50], "segment_names": ["a", "b", "c"]}, "2 segments start"),
+        ({"key_position_names": ["address", ""]}, "key_position_names: expected a list"),
+        ({"key_position_names": ["address", "top", "end"]}, "3 segments have 4 key positions"),
+        ({"segments": [1, 50], "key_position_names": ["a", "b"]}, "2 segments have 3"),
     ],
 )
 def test_invalid_documents_are_refused(doc, match):
     with pytest.raises(InvalidInput, match=match):
         parse_domain(doc, n_segments=3)
+
+
+def test_key_positions_are_named_one_per_segment_start_and_one_for_the_end():
+    d = parse_domain({"key_position_names": ["address", "top", "impact", "finish"]}, n_segments=3)
+    assert d.key_position_names == ("address", "top", "impact", "finish")
+    assert d.to_dict()["key_position_names"] == list(d.key_position_names)
+    assert parse_domain({}).key_position_names == ()
 
 
 def test_all_zero_weights_refused():
