@@ -251,6 +251,9 @@ class Comment(Base):
     #: Segment index the comment is pinned to, or None.
     segment: Mapped[int | None] = mapped_column(Integer, default=None)
     body: Mapped[str] = mapped_column(Text)
+    #: Strokes drawn over the pinned frame: lists of [x, y], shares of the video's width and
+    #: height; None without a drawing.
+    drawing: Mapped[list | None] = mapped_column(JSON, default=None)
     created_at: Mapped[datetime] = mapped_column(UTCDateTime(), default=utcnow)
 
     author: Mapped[User | None] = relationship()

@@ -433,10 +433,18 @@ class SegmentsPublic(BaseModel):
 
 
 # ---- comments
+#: One point of a drawing: shares of the video's width and height, in [0, 1].
+Share = Annotated[float, Field(ge=0.0, le=1.0)]
+#: One stroke: 2 to 2000 points.
+Stroke = Annotated[list[tuple[Share, Share]], Field(min_length=2, max_length=2000)]
+
+
 class CommentCreate(BaseModel):
     body: str = Field(min_length=1, max_length=4000)
     frame: int | None = Field(default=None, ge=0, le=1_000_000)
     segment: int | None = Field(default=None, ge=0, le=1000)
+    #: Strokes drawn over the frame the comment is pinned to (``frame`` required).
+    drawing: list[Stroke] | None = Field(default=None, min_length=1, max_length=50)
 
 
 class CommentPublic(BaseModel):
@@ -444,6 +452,7 @@ class CommentPublic(BaseModel):
     body: str
     frame: int | None
     segment: int | None
+    drawing: list[list[tuple[float, float]]] | None = None
     author: str
     author_id: int | None
     created_at: str

@@ -549,3 +549,57 @@ def test_a_coach_sets_segment_boundaries_on_the_plot(server, browser, shots):
     assert page.request.get(url).json()["derived"]["segments"] == before
     page.request.delete(url)
     ctx.close()
+
+
+def _ink_pixels(page) -> int:
+    """Pixels of the drawing ink (#f03e3e) on the video's overlay."""
+    return page.evaluate("""() => {
+        const c = document.getElementById('overlay'), d = c.getContext('2d')
+            .getImageData(0, 0, c.width, c.height).data;
+        let n = 0;
+        for (let i = 0; i < d.length; i += 4)
+            if (d[i] > 200 && d[i + 1] < 90 && d[i + 2] < 90 && d[i + 3] > 200) n++;
+        return n;
+    }""")
+
+
+def test_a_coach_draws_over_a_frame_and_the_drawing_comes_back(
+    server, browser, clip, clip_result, shots
+):
+    aid = server.add_done_analysis("olive", clip, clip_result)
+    ctx = browser.new_context(viewport={"width": 1280, "height": 1000})
+    page = ctx.new_page()
+    sign_in(page, server.url, COACH[0], COACH[1], next_path=f"/analyses/{aid}")
+    wait_results(page)
+    page.get_by_role("checkbox", name="Skeleton").uncheck()  # only the drawing on the overlay
+    go_to_frame(page, 3)
+    assert _ink_pixels(page) == 0
+    page.get_by_role("button", name="Draw on the video").click()
+    page.locator("#overlay").scroll_into_view_if_needed()
+    box = page.locator("#overlay").bounding_box()
+    page.mouse.move(box["x"] + 0.2 * box["width"], box["y"] + 0.3 * box["height"])
+    page.mouse.down()
+    for k in range(1, 11):
+        page.mouse.move(box["x"] + (0.2 + 0.04 * k) * box["width"],
+                        box["y"] + (0.3 + 0.03 * k) * box["height"])  # fmt: skip
+    page.mouse.up()
+    assert _ink_pixels(page) > 50
+    page.get_by_label("New comment").fill("Elbow along this line")
+    page.get_by_role("button", name="Add comment").click()
+    page.wait_for_function("() => document.querySelectorAll('#comments li.comment').length === 1")
+    (c,) = page.request.get(f"{server.url}/api/v1/analyses/{aid}/comments").json()["items"]
+    assert c["frame"] == clip_result["frames"][3]["t"] and len(c["drawing"]) == 1
+    (x0, y0), (x1, y1) = c["drawing"][0][0], c["drawing"][0][-1]
+    assert (x0, y0) == pytest.approx((0.2, 0.3), abs=0.02)
+    assert (x1, y1) == pytest.approx((0.6, 0.6), abs=0.02)
+    page.reload()
+    wait_results(page)
+    page.get_by_role("checkbox", name="Skeleton").uncheck()
+    page.wait_for_function("() => document.querySelectorAll('#comments li.comment').length === 1")
+    assert "✎ drawing" in page.locator("#comments li.comment").inner_text()
+    assert _ink_pixels(page) == 0  # frame 0: not the drawing's frame
+    page.locator("#comments .pin").click()  # the comment's pin goes to its frame
+    page.wait_for_function("() => document.getElementById('analysis').dataset.frame === '3'")
+    assert _ink_pixels(page) > 50
+    page.locator(".video-wrap").screenshot(path=str(shots / "drawing.png"))
+    ctx.close()

@@ -234,6 +234,27 @@ def test_comments_pinned_and_persisted(env):
     assert client.get(base).json()["total"] == 1
 
 
+def test_a_drawing_is_saved_with_its_comment_on_a_frame(env):
+    app, client, ids, _, settings = env
+    aid = add_done(app, settings, ids, ids["perf"])
+    sign_in(client, "c@a.org")
+    base = f"/api/v1/analyses/{aid}/comments"
+    line = [[0.2, 0.3], [0.25, 0.35], [0.3, 0.5]]
+    r = client.post(base, json={"body": "keep the elbow here", "frame": 4, "drawing": [line]})
+    assert r.status_code == 201, r.text
+    assert r.json()["drawing"] == [line]
+    got = client.get(base).json()["items"][0]
+    assert (got["frame"], got["drawing"]) == (4, [line])
+    assert client.post(base, json={"body": "x", "frame": 4}).json()["drawing"] is None
+    for bad in (
+        {"body": "no frame", "drawing": [line]},  # a drawing belongs to a frame
+        {"body": "off the picture", "frame": 1, "drawing": [[[0.2, 0.3], [1.4, 0.3]]]},
+        {"body": "a dot", "frame": 1, "drawing": [[[0.2, 0.3]]]},
+        {"body": "nothing", "frame": 1, "drawing": []},
+    ):
+        assert client.post(base, json=bad).status_code == 422, bad
+
+
 def test_key_positions_take_the_coachs_names(env):
     app, client, ids, _, settings = env
     aid = add_done(app, settings, ids, ids["perf"])

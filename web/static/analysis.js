@@ -267,7 +267,8 @@
     return true;
   }
 
-  function drawOverlay() {
+  function drawOverlay() { drawScene(); drawNotes(); }
+  function drawScene() {
     const ctx = overlay.getContext("2d");
     ctx.clearRect(0, 0, overlay.width, overlay.height);
     if (!result || outside) return;
@@ -493,8 +494,64 @@
     out.textContent = "you " + Math.round(you) + "°, the expert " + Math.round(them) + "°: " + how;
   }
   $("angle-joint").addEventListener("change", function () { drawOverlay(); showAngle(); });
+  // ---------------------------------------------------------------- drawing
+  // Strokes over the paused frame, in shares of the video's width and height, saved with a
+  // comment pinned to that frame; a comment's drawing shows whenever its frame is on screen.
+  const NOTE_INK = "#f03e3e";
+  let drawingOn = false, pending = [], pendingFrame = null, stroke = null, drawnComments = [];
+  function strokesAt(t) {
+    const out = pendingFrame === t ? pending.slice() : [];
+    drawnComments.forEach(function (c) { if (c.frame === t) out.push.apply(out, c.drawing); });
+    return out;
+  }
+  function drawNotes() {
+    if (!result) return;
+    const ctx = overlay.getContext("2d"), W = overlay.width, H = overlay.height;
+    ctx.strokeStyle = NOTE_INK; ctx.lineWidth = Math.max(2, H / 110); ctx.lineCap = "round"; ctx.lineJoin = "round";
+    strokesAt(frame + first).forEach(function (s) {
+      ctx.beginPath();
+      s.forEach(function (q, i) { if (i) ctx.lineTo(q[0] * W, q[1] * H); else ctx.moveTo(q[0] * W, q[1] * H); });
+      ctx.stroke();
+    });
+  }
+  function share(ev) {
+    const r = overlay.getBoundingClientRect();
+    return [Math.min(Math.max((ev.clientX - r.left) / r.width, 0), 1), Math.min(Math.max((ev.clientY - r.top) / r.height, 0), 1)];
+  }
+  $("draw-toggle").addEventListener("click", function () {
+    drawingOn = !drawingOn;
+    this.setAttribute("aria-pressed", String(drawingOn));
+    this.textContent = drawingOn ? "Stop drawing" : "Draw on the video";
+    $("stage-box").classList.toggle("drawing", drawingOn);
+    if (drawingOn) video.pause();
+  });
+  $("draw-clear").addEventListener("click", function () {
+    pending = []; pendingFrame = null; this.disabled = true; drawOverlay();
+  });
+  $("stage-box").addEventListener("pointerdown", function (ev) {
+    if (!drawingOn || !result) return;
+    ev.preventDefault();
+    if (pendingFrame !== frame + first) { pending = []; pendingFrame = frame + first; }  // one frame per drawing
+    stroke = [share(ev)];
+    pending.push(stroke);
+    this.setPointerCapture(ev.pointerId);
+  });
+  $("stage-box").addEventListener("pointermove", function (ev) {
+    if (!stroke) return;
+    const q = share(ev), last = stroke[stroke.length - 1];
+    if (Math.hypot(q[0] - last[0], q[1] - last[1]) < 0.003) return;
+    stroke.push(q);
+    drawOverlay();
+  });
+  $("stage-box").addEventListener("pointerup", function () {
+    if (!stroke) return;
+    if (stroke.length < 2) pending.pop();  // a tap is not a stroke
+    stroke = null;
+    $("draw-clear").disabled = !pending.length;
+    drawOverlay();
+  });
   $("stage-box").addEventListener("click", function (ev) {
-    if (!angles || !result || outside) return;
+    if (drawingOn || !angles || !result || outside) return;
     const r = overlay.getBoundingClientRect();
     const u = (ev.clientX - r.left) * overlay.width / r.width, v = (ev.clientY - r.top) * overlay.height / r.height;
     const p = result.frames[frame].joints_2d;
@@ -589,12 +646,14 @@
   // ---------------------------------------------------------------- comments
   async function loadComments() {
     const items = (await coach.api(base + "/comments?limit=100")).items;
+    drawnComments = items.filter(function (c) { return c.drawing && c.frame != null; });
+    drawOverlay();
     const ul = $("comments");
     ul.textContent = "";
     if (!items.length) ul.append(coach.el("li", { class: "muted", text: "No comments yet." }));
     items.forEach(function (c) {
       let pin;
-      if (c.frame != null) pin = coach.el("button", { type: "button", class: "link pin", text: "frame " + c.frame, onclick: function () { video.pause(); seek(c.frame - first); } });
+      if (c.frame != null) pin = coach.el("button", { type: "button", class: "link pin", text: "frame " + c.frame + (c.drawing ? " ✎ drawing" : ""), onclick: function () { video.pause(); seek(c.frame - first); } });
       else if (c.segment != null && summary.segments[c.segment]) pin = coach.el("button", { type: "button", class: "link pin", text: summary.segments[c.segment].name, onclick: function () { video.pause(); seek(summary.segments[c.segment].performer_start - first); } });
       else pin = coach.el("span", { class: "pin", text: "general" });
       const del = coach.el("button", { type: "button", class: "link", text: "Delete", "aria-label": "Delete comment", onclick: async function () {
@@ -611,11 +670,13 @@
     const data = { body: body };
     if (pin === "frame") data.frame = frame + first;
     else if (pin.startsWith("segment:")) data.segment = +pin.split(":")[1];
+    if (pending.length) { data.drawing = pending; data.frame = pendingFrame; delete data.segment; }  // on the frame drawn over
     const button = this.querySelector("button[type=submit]");
     button.disabled = true;
     try {
       await coach.api(base + "/comments", { method: "POST", json: data });
       $("comment-body").value = "";
+      pending = []; pendingFrame = null; $("draw-clear").disabled = true;
       await loadComments();
     } finally { button.disabled = false; }
   });

@@ -25,6 +25,7 @@ def comment_public(c: Comment) -> dict[str, Any]:
         "body": c.body,
         "frame": c.frame,
         "segment": c.segment,
+        "drawing": c.drawing,
         "author": c.author.display_name if c.author else "(removed)",
         "author_id": c.author_id,
         "created_at": c.created_at.isoformat(),
@@ -69,9 +70,12 @@ def create_comment(
 ):  # fmt: skip
     a = analysis_for(session, who, analysis_id)
     user = who.require_user()
+    if body.drawing is not None and body.frame is None:
+        raise ApiError(422, "invalid_comment", "a drawing is drawn over a frame: give `frame`")
     c = Comment(
         club_id=a.club_id, analysis_id=a.id, author_id=user.id, frame=body.frame,
         segment=body.segment, body=body.body.strip(),
+        drawing=None if body.drawing is None else [[list(p) for p in s] for s in body.drawing],
     )  # fmt: skip
     session.add(c)
     session.commit()
