@@ -202,3 +202,32 @@ def test_the_upload_page_checks_the_first_frame_before_uploading(server, browser
     page.wait_for_selector("#framing-check[data-state=undecodable]", timeout=20_000)
     assert "checked once it is uploaded" in check.inner_text()
     ctx.close()
+
+
+def test_at_phone_width_the_3d_view_keeps_its_panel_minimised(
+    server, browser, clip, clip_result, shots
+):
+    """Viser's phone layout opens its controls over the scene; the page keeps the frame at
+    580 CSS px, scaled to the screen, so the scene shows the bodies, not the panel."""
+    ctx, page, _ = open_done_analysis(server, browser, clip, clip_result, width=390, height=844)
+    page.wait_for_selector("#viewer3d:not([hidden]), #fallback3d:not([hidden])", timeout=30_000)
+    if page.locator("#viewer3d").is_hidden():
+        pytest.skip(f"no 3D view here: {page.locator('#viewer-status').inner_text()}")
+    iframe = page.locator("#viewer3d")
+    assert 0.4 < float(iframe.get_attribute("data-scale")) < 1
+    box = iframe.bounding_box()
+    assert box["width"] <= 390, "the scaled frame fits the screen"
+    frame = page.frame_locator("#viewer3d")
+    frame.locator("canvas").first.wait_for(timeout=20_000)
+    page.wait_for_timeout(1500)
+    close = frame.get_by_role("button", name="Close")  # headless Chromium's software-GL notice
+    for i in range(close.count()):
+        close.nth(i).click()
+    page.wait_for_timeout(800)
+    iframe.scroll_into_view_if_needed()
+    png = iframe.screenshot(path=str(shots / "viewer3d-phone.png"))
+    count, height, _ = _skeleton_box(_pixels(png))
+    assert count > 500 and height > 0.4, (count, height)
+    settings = frame.get_by_text("Orbit Origin Tool")  # the phone sheet's settings, if open
+    assert settings.count() == 0 or not settings.first.is_visible()
+    ctx.close()

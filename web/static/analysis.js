@@ -117,7 +117,7 @@
       try {
         const v = await coach.api(base + "/viewer/live", { method: "POST" });
         if (!iframe.getAttribute("src")) iframe.src = v.url + TAB + "/";
-        fig.hidden = false;
+        if (fig.hidden) { fig.hidden = false; fitFrame(iframe); }
         fig.dataset.phase = v.phase;
         fig.dataset.framesDone = String(v.frames_done);
         $("live3d-status").textContent = (LIVE_TEXT[v.phase] || "").replace("{done}", v.frames_done).replace("{n}", v.frames);
@@ -681,6 +681,25 @@
     } finally { button.disabled = false; }
   });
 
+  // ---------------------------------------------------------------- 3D frame at phone width
+  // Below 576 px viser 1.1 lays its controls out as a bottom sheet that opens over the scene
+  // (its client's BottomPanel starts expanded; main_panel.minimize() does not reach it).
+  // Narrower than VISER_MIN_PX, the frame keeps that width and is scaled down to fit, so the
+  // scene keeps the desktop layout, its panel minimised; touches are scaled with it.
+  const VISER_MIN_PX = 580;  // mantine's xs breakpoint, 36em = 576 px, and a little more
+  function fitFrame(iframe) {
+    iframe.style.width = ""; iframe.style.height = ""; iframe.style.transform = ""; iframe.style.margin = "";
+    const avail = iframe.parentElement.clientWidth - parseFloat(getComputedStyle(iframe.parentElement).paddingLeft) * 2;
+    if (!(avail > 0) || avail >= VISER_MIN_PX) { delete iframe.dataset.scale; return; }
+    const k = avail / VISER_MIN_PX, h = iframe.getBoundingClientRect().height;
+    iframe.style.width = VISER_MIN_PX + "px"; iframe.style.height = (h / k) + "px";
+    iframe.style.transformOrigin = "0 0"; iframe.style.transform = "scale(" + k + ")";
+    iframe.style.margin = "0 " + (avail - VISER_MIN_PX) + "px " + (h - h / k) + "px 0";
+    iframe.dataset.scale = k.toFixed(3);
+  }
+  function fitFrames() { ["viewer3d", "live-viewer3d"].forEach(function (id) { fitFrame($(id)); }); }
+  window.addEventListener("resize", fitFrames);
+
   // ---------------------------------------------------------------- 3D view
   async function start3d() {
     try {
@@ -688,6 +707,7 @@
       const frameEl = $("viewer3d");
       frameEl.src = v.url + TAB + "/";
       frameEl.hidden = false;
+      fitFrame(frameEl);
       $("viewer-status").textContent = "3D view: drag to orbit, scroll to zoom. It follows the timeline.";
       viewerReady = true;
       sync3d();
