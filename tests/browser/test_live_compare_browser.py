@@ -60,7 +60,8 @@ def _close_notices(frame, page) -> None:
             pass
 
 
-def test_3d_view_fills_in_while_the_analysis_runs(server, browser, long_clip, shots):
+def _upload_long_clip(browser, server, long_clip: Path):
+    """Olive signed in, her upload of ``long_clip`` queued: ``(context, page, analysis id)``."""
     ctx = browser.new_context(viewport={"width": 1280, "height": 1100})
     page = ctx.new_page()
     sign_in(page, server.url, "olive@example.com")
@@ -73,7 +74,12 @@ def test_3d_view_fills_in_while_the_analysis_runs(server, browser, long_clip, sh
         },
     )  # fmt: skip
     assert r.status == 201, r.text()
-    page.goto(f"{server.url}/analyses/{r.json()['id']}")
+    return ctx, page, r.json()["id"]
+
+
+def test_3d_view_fills_in_while_the_analysis_runs(server, browser, long_clip, shots):
+    ctx, page, aid = _upload_long_clip(browser, server, long_clip)
+    page.goto(f"{server.url}/analyses/{aid}")
     live = page.locator("#live3d")
     page.wait_for_selector(
         "#live3d[data-phase=reference], #live3d[data-phase=candidates]", timeout=90_000
@@ -179,19 +185,7 @@ def _frozen_worker(work_dir: Path, timeout_s: float = 120.0) -> int:
 
 
 def test_the_first_segments_show_before_the_analysis_ends(server, browser, long_clip, shots):
-    ctx = browser.new_context(viewport={"width": 1280, "height": 1100})
-    page = ctx.new_page()
-    sign_in(page, server.url, "olive@example.com")
-    r = page.request.post(
-        f"{server.url}/api/v1/analyses",
-        multipart={
-            "video": {"name": "swing.mp4", "mimeType": "video/mp4",
-                      "buffer": long_clip.read_bytes()},
-            "reference_id": str(server.reference_id),
-        },
-    )  # fmt: skip
-    assert r.status == 201, r.text()
-    aid = r.json()["id"]
+    ctx, page, aid = _upload_long_clip(browser, server, long_clip)
     from app import crud
 
     with server.sessions()() as s:
