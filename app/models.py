@@ -190,6 +190,9 @@ class Analysis(Base):
     #: The headline of a done analysis: its mean posture error eps_t' over the frames, kept
     #: here (set when the result is reflected) so that lists need not read every result.
     mean_error_deg: Mapped[float | None] = mapped_column(Float, default=None)
+    #: What the video's first frame says about the filming (feet out of the picture...), known
+    #: once stages 0-2 are done (``framing.json``); None before.
+    warnings: Mapped[list | None] = mapped_column(JSON, default=None)
     #: The coach's "reviewed" mark (None: still to review), and who set it.
     reviewed_at: Mapped[datetime | None] = mapped_column(UTCDateTime(), default=None)
     reviewed_by_id: Mapped[int | None] = mapped_column(

@@ -324,6 +324,9 @@ class AnalysisPublic(_Orm):
     frames_end: int | None = None
     #: The headline once done: the mean posture error over the frames, in degrees.
     mean_error_deg: float | None = None
+    #: What the video's first frame says about the filming, one sentence each, once stages
+    #: 0-2 are done (null before): shown while the rest of the analysis runs.
+    warnings: list[str] | None = None
     #: When a coach marked the analysis reviewed (null: still to review), and who.
     reviewed_at: datetime | None = None
     reviewed_by_id: int | None = None

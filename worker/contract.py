@@ -122,6 +122,8 @@ class AnalysisFolder:
         result.json      the DESIGN.md result, present once the analysis is done
         provisional.json the same for the first whole segments only, with a "provisional"
                          entry (engine.provisional), written while stage 3 runs on the rest
+        framing.json     {"problems": [str]}: what the first frame says about the filming
+                         (engine.stages.framing), written with stages 0-2's output
         cancel           marker: the analysis was cancelled (or failed for good): messages
                          still queued for it stop
         tasks.json       the Celery task ids of the analysis' canvas
@@ -148,6 +150,7 @@ class AnalysisFolder:
         self.status = self.work_dir / "status.json"
         self.result = self.work_dir / "result.json"
         self.provisional = self.work_dir / "provisional.json"
+        self.framing = self.work_dir / "framing.json"
         self.cancel = self.work_dir / "cancel"
         self.tasks = self.work_dir / "tasks.json"
         self.heartbeat = self.work_dir / "heartbeat"

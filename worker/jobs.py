@@ -319,6 +319,9 @@ def run_prepare(
         )  # fmt: skip
         check_cancel(job)
         write_atomic(paths.prepared, prepared.save)
+        # shown while the rest runs: the upload page could not check a video its browser
+        # cannot decode, and API uploads are not checked before they arrive
+        write_json_atomic(paths.framing, {"problems": list(getattr(prepared, "framing", ()))})
     _stage_done(job, "prepare", started)
     return paths.prepared
 

@@ -80,6 +80,9 @@ def reflect(session: Session, analysis: Analysis, *, on_final: OnFinal | None = 
         "message": _text(status.get("message", analysis.message), 1000),
         "error": _text(status["error"], 10000) if status.get("error") else analysis.error,
     }
+    framing = Storage.read_json(folder.framing)
+    if framing is not None and isinstance(framing.get("problems"), list):
+        values["warnings"] = [_text(str(p), 500) for p in framing["problems"][:10]]
     try:
         values["progress"] = min(max(float(status.get("progress", analysis.progress)), 0.0), 1.0)
     except (TypeError, ValueError):

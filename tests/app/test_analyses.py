@@ -240,6 +240,21 @@ def test_the_first_segments_show_while_the_analysis_runs(client, club_ref, queue
     assert r.status_code == 409 and r.json()["error"]["code"] == "done"
 
 
+def test_what_the_first_frame_shows_is_reflected_while_it_runs(client, club_ref, queue, video_file):
+    a = upload(client, club_ref, video_file).json()
+    work = queue.jobs[0].work_dir
+    url, h = f"/api/v1/analyses/{a['id']}", club_ref.headers
+    assert client.get(url, headers=h).json()["warnings"] is None  # stages 0-2 not done yet
+    status(work, "running", 0.4, stage="candidates")
+    feet = "Your feet are out of the picture: step back."
+    write_atomic(Path(work) / "framing.json", {"problems": [feet]})
+    assert client.get(url, headers=h).json()["warnings"] == [feet]
+    write_atomic(Path(work) / "framing.json", {"problems": []})
+    assert client.get(url, headers=h).json()["warnings"] == []
+    write_atomic(Path(work) / "framing.json", {"problems": "not a list"})
+    assert client.get(url, headers=h).json()["warnings"] == []  # a bad file changes nothing
+
+
 def test_failed_status_is_reflected(client, club_ref, queue, video_file):
     a = upload(client, club_ref, video_file).json()
     write_atomic(

@@ -4,6 +4,7 @@ preview, invite links, the printable report's stills and upload errors next to t
 from __future__ import annotations
 
 import io
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -230,4 +231,58 @@ def test_at_phone_width_the_3d_view_keeps_its_panel_minimised(
     assert count > 500 and height > 0.4, (count, height)
     settings = frame.get_by_text("Orbit Origin Tool")  # the phone sheet's settings, if open
     assert settings.count() == 0 or not settings.first.is_visible()
+    ctx.close()
+
+
+def _hevc(path: Path, frames: np.ndarray, fps: float) -> Path:
+    """An HEVC (H.265) MP4: what an iPhone records, which many browsers cannot decode."""
+    import av
+
+    with av.open(str(path), "w") as out:
+        stream = out.add_stream("libx265", rate=int(round(fps)))
+        stream.width, stream.height, stream.pix_fmt = frames.shape[2], frames.shape[1], "yuv420p"
+        stream.options = {"x265-params": "log-level=error"}
+        for f in frames:
+            out.mux(stream.encode(av.VideoFrame.from_ndarray(f, format="rgb24")))
+        out.mux(stream.encode(None))
+    return path
+
+
+def test_the_analysis_says_what_the_first_frame_shows_while_it_runs(
+    server, browser, shots, tmp_path
+):
+    """An HEVC upload through the API, the legs cut off: no browser checked its first frame,
+    so the analysis page says what to change as soon as stages 0-2 are done."""
+    from engine.io.video import read_video
+    from tests.engine.stages.test_framing import SQUAT
+
+    v = read_video(SQUAT, height=240, max_frames=12)
+    cut = np.ascontiguousarray(v.frames[:, : int(0.6 * v.frames.shape[1]) // 2 * 2])
+    video = _hevc(tmp_path / "cut-hevc.mp4", cut, v.fps)
+    ctx = browser.new_context(viewport={"width": 1000, "height": 1000})
+    page = ctx.new_page()
+    sign_in(page, server.url, "pat@example.com")
+    r = page.request.post(f"{server.url}/api/v1/analyses", multipart={
+        "video": {"name": "cut.mp4", "mimeType": "video/mp4", "buffer": video.read_bytes()},
+        "reference_id": str(server.reference_id)})  # fmt: skip
+    assert r.status == 201, r.text()
+    aid = r.json()["id"]
+    page.goto(f"{server.url}/analyses/{aid}")
+    try:
+        # while it runs; should it end first, the result's messages say the same
+        shown = page.wait_for_selector(
+            "#framing-warnings:not([hidden]) li, #result-messages:not([hidden]) li",
+            timeout=120_000,
+        )
+        running = shown.evaluate("e => !!e.closest('#framing-warnings')")
+        box = page.locator("#framing-warnings" if running else "#result-messages")
+        page.wait_for_function(
+            "() => /feet are out of the picture/.test(document.body.innerText)", timeout=60_000
+        )
+        assert "feet are out of the picture" in box.inner_text()
+        page.locator("#progress-view" if running else "#results").screenshot(
+            path=str(shots / "first-frame-warning.png")
+        )
+    finally:
+        page.request.post(f"{server.url}/api/v1/analyses/{aid}/cancel")
     ctx.close()

@@ -39,6 +39,8 @@ def test_the_first_segment_is_written_before_the_last_chunk_runs(job, caplog) ->
     assert [s["name"] for s in doc["segments"]] == ["down"]
     assert seen[3] == doc, "near the end no new provisional result is computed"
     assert "analysis.provisional " in caplog.text
+    # what the first frame says about the filming is known from stages 0-2 on
+    assert jobs.read_json(paths.framing) == {"problems": []}  # the synthetic body is whole
     final = json.loads(jobs.run_select(job, 4).read_text())
     assert len(final["segments"]) == 2 and "provisional" not in final
 

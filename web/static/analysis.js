@@ -54,6 +54,7 @@
       ol.append(coach.el("li", { class: done ? "done" : "current", text: (done ? "✓ " : "") + s }));
     });
     if (a.error) { $("analysis-error").textContent = a.error; $("analysis-error").hidden = false; }
+    showWarnings(a.warnings || []);
     $("cancel").hidden = !(a.status === "queued" || a.status === "running");
     // The live 3D view exists once stage 2 has aligned the expert: ask for it only then.
     if (a.status === "running" && LIVE_STAGES.indexOf(a.stage) >= 0) followLive();
@@ -98,6 +99,18 @@
     if (firstTimer) { clearInterval(firstTimer); firstTimer = null; }
     $("first-cards").textContent = "";  // the final cards replace them
     $("first-results").hidden = true;
+  }
+  // What the first frame says about the filming, known once stages 0-2 are done: the upload
+  // page checks it only for videos this browser can decode (engine/stages/framing.py).
+  let warningsShown = "";
+  function showWarnings(list) {
+    const key = list.join("\n");
+    if (key === warningsShown) return;
+    warningsShown = key;
+    const box = $("framing-warnings"), ul = box.querySelector("ul");
+    ul.textContent = "";
+    list.forEach(function (t) { ul.append(coach.el("li", { text: t })); });
+    box.hidden = !list.length;
   }
   const LIVE_STAGES = ["candidates", "select", "selection"];
   // While it runs, the 3D view fills in: the aligned expert after stage 2, the best candidate
