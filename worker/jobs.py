@@ -405,7 +405,8 @@ def write_provisional(
         chunks = [engine_pipeline.CandidateChunk.load(p) for p in done]
         n_done = engine_provisional.finished_prefix(prepared, chunks)
         k, n = engine_provisional.covered_segments(prepared, n_done)
-        if paths.result.exists() or n_done > (1 - PROVISIONAL_MIN_LEFT) * prepared.n_frames:
+        waiting = prepared.n_frames - sum(len(c.frames) for c in chunks)
+        if paths.result.exists() or waiting < PROVISIONAL_MIN_LEFT * prepared.n_frames:
             return None
         old = read_json(paths.provisional)
         if k == 0 or (old is not None and old["provisional"]["segments"] >= k):

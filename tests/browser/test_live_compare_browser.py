@@ -60,8 +60,8 @@ def _close_notices(frame, page) -> None:
             pass
 
 
-def _upload_long_clip(browser, server, long_clip: Path):
-    """Olive signed in, her upload of ``long_clip`` queued: ``(context, page, analysis id)``."""
+def _upload_clip(browser, server, clip: Path):
+    """Olive signed in, her upload of ``clip`` queued: ``(context, page, analysis id)``."""
     ctx = browser.new_context(viewport={"width": 1280, "height": 1100})
     page = ctx.new_page()
     sign_in(page, server.url, "olive@example.com")
@@ -69,7 +69,7 @@ def _upload_long_clip(browser, server, long_clip: Path):
         f"{server.url}/api/v1/analyses",
         multipart={
             "video": {"name": "swing.mp4", "mimeType": "video/mp4",
-                      "buffer": long_clip.read_bytes()},
+                      "buffer": clip.read_bytes()},
             "reference_id": str(server.reference_id),
         },
     )  # fmt: skip
@@ -78,7 +78,7 @@ def _upload_long_clip(browser, server, long_clip: Path):
 
 
 def test_3d_view_fills_in_while_the_analysis_runs(server, browser, long_clip, shots):
-    ctx, page, aid = _upload_long_clip(browser, server, long_clip)
+    ctx, page, aid = _upload_clip(browser, server, long_clip)
     page.goto(f"{server.url}/analyses/{aid}")
     live = page.locator("#live3d")
     page.wait_for_selector(
@@ -170,6 +170,19 @@ def test_two_attempts_side_by_side(server, browser, clip, clip_result, shots):
     ctx.close()
 
 
+@pytest.fixture(scope="session")
+def whole_clip(tmp_path_factory) -> Path:
+    """The whole swing, every 4th frame (35 frames): its first segment ends near the middle,
+    so the chunks that complete it finish while the second half still waits."""
+    from engine.io.encode import write_video
+    from engine.io.video import read_video
+
+    v = read_video(SOURCE_VIDEO, height=0)
+    path = tmp_path_factory.mktemp("whole-clip") / "swing35.mp4"
+    write_video(path, v.frames[::4], v.fps / 4)
+    return path
+
+
 def _frozen_worker(work_dir: Path, timeout_s: float = 120.0) -> int:
     """Wait for the worker to write the provisional result, then stop its process group
     (SIGSTOP: a worker that is slow to finish the rest); returns the group to continue."""
@@ -184,8 +197,8 @@ def _frozen_worker(work_dir: Path, timeout_s: float = 120.0) -> int:
     return group
 
 
-def test_the_first_segments_show_before_the_analysis_ends(server, browser, long_clip, shots):
-    ctx, page, aid = _upload_long_clip(browser, server, long_clip)
+def test_the_first_segments_show_before_the_analysis_ends(server, browser, whole_clip, shots):
+    ctx, page, aid = _upload_clip(browser, server, whole_clip)
     from app import crud
 
     with server.sessions()() as s:
