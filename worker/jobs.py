@@ -321,7 +321,7 @@ def run_prepare(
         write_atomic(paths.prepared, prepared.save)
         # shown while the rest runs: the upload page could not check a video its browser
         # cannot decode, and API uploads are not checked before they arrive
-        write_json_atomic(paths.framing, {"problems": list(getattr(prepared, "framing", ()))})
+        write_json_atomic(paths.framing, {"problems": list(prepared.framing)})
     _stage_done(job, "prepare", started)
     return paths.prepared
 

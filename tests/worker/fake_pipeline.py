@@ -66,6 +66,7 @@ def _sleep_progress(stage, n, seconds_per_frame, on_progress):
 class Prepared:
     seed: np.ndarray  # Shape (T',)
     settings_seconds: float = 0.0
+    framing: tuple[str, ...] = ()  # the engine's first-frame advice: none here
 
     def save(self, path):
         np.savez(path, seed=self.seed, settings_seconds=self.settings_seconds)

@@ -77,13 +77,9 @@
         const box = $("first-cards");
         box.textContent = "";
         p.segments.forEach(function (s) {
-          const card = coach.el("div", { class: "seg-card provisional" }, [
-            coach.el("h3", { text: s.name }),
-            coach.el("span", { class: "score", text: deg(s.score != null ? s.score : s.mean_error_deg) }),
-            coach.el("span", { class: "muted", text: "frames " + s.performer_start + "–" + s.performer_end }),
-            coach.el("span", { text: "Tempo: " + s.tempo_text }),
+          const card = coach.el("div", { class: "seg-card provisional" }, segmentHead(s).concat([
             coach.el("ul", {}, s.worst_bones.map(function (wb) { return coach.el("li", { text: wb[0] + ": " + deg(wb[1]) }); })),
-          ]);
+          ]));
           card.style.borderLeftColor = coach.errorColor(s.mean_error_deg);
           box.append(card);
         });
@@ -591,6 +587,15 @@
     return coach.el("span", { class: s.within_expert_range ? "seg-within" : "seg-outside",
       text: s.within_expert_range ? "within the expert's range" : "outside the expert's range at " + s.outside_bones.slice(0, 3).join(", ") });
   }
+  // A segment card's first lines: its name, score, frames and tempo (final and provisional).
+  function segmentHead(s) {
+    return [
+      coach.el("h3", { text: s.name }),
+      coach.el("span", { class: "score", text: deg(s.score != null ? s.score : s.mean_error_deg) }),
+      coach.el("span", { class: "muted", text: "frames " + s.performer_start + "–" + s.performer_end }),
+      coach.el("span", { text: "Tempo: " + s.tempo_text }),
+    ];
+  }
   function buildSegments() {
     const box = $("segment-cards");
     box.textContent = "";
@@ -601,15 +606,11 @@
       const warn = misfit ? coach.el("span", { class: "seg-misfit", text: "⚠ the video disagrees in " + misfit + " of " + span +
         " frames" + (where.length ? ", mostly at " + where.join(", ") : "") + ": look at them yourself" }) : null;
       const card = coach.el("button", { type: "button", class: "seg-card", "data-index": i,
-        "aria-label": s.name + ": mean error " + deg(s.mean_error_deg).slice(0, -1) + " degrees" + (misfit ? ", but the video disagrees in " + misfit + " frames; go to the first of them" : "; go to its first frame") }, [
-        coach.el("h3", { text: s.name }),
-        coach.el("span", { class: "score", text: deg(s.score != null ? s.score : s.mean_error_deg) }),
-        coach.el("span", { class: "muted", text: "frames " + s.performer_start + "–" + s.performer_end }),
-        coach.el("span", { text: "Tempo: " + s.tempo_text }),
+        "aria-label": s.name + ": mean error " + deg(s.mean_error_deg).slice(0, -1) + " degrees" + (misfit ? ", but the video disagrees in " + misfit + " frames; go to the first of them" : "; go to its first frame") }, segmentHead(s).concat([
         rangeText(s),  // null (skipped) for a reference from one take
         coach.el("ul", {}, s.worst_bones.map(function (wb) { return coach.el("li", { text: wb[0] + ": " + deg(wb[1]) + spread(wb[2]) }); })),
         warn,  // null (skipped) where the video agrees
-      ]);
+      ]));
       card.style.borderLeftColor = misfit ? MISFIT : coach.errorColor(s.mean_error_deg);
       // a segment where the video disagrees opens at its first such frame, where there is most to see
       const firstMisfit = misfit ? result.frames.findIndex(function (f) {

@@ -78,7 +78,7 @@
     const frames = function () { return state.curve ? state.curve.frames : (state.end || 0) + 1; };
     const x = function (f) { return W * f / Math.max(frames() - 1, 1); };
     function fitNames() {  // as many names as segments: keep the coach's, name the new ones
-      const names = segInput.value.split("\n").map(function (v) { return v.trim(); }).filter(Boolean);
+      const names = lines(segInput);
       const n = state.starts.length;
       while (names.length < n) names.push("segment " + (names.length + 1));
       segInput.value = names.slice(0, n).join("\n");
@@ -92,7 +92,7 @@
         const pts = v.map(function (s, i) { return x(i * c.step).toFixed(1) + "," + (T + (H - T - B) * (1 - Math.min(s / top, 1))).toFixed(1); });
         plot.append(svg("polyline", { points: pts.join(" "), fill: "none", stroke: "#8792a2", "stroke-width": 1.2 }));
       }
-      const names = segInput.value.split("\n").map(function (v) { return v.trim(); }).filter(Boolean);
+      const names = lines(segInput);
       state.starts.forEach(function (f, i) {
         const next = i + 1 < state.starts.length ? state.starts[i + 1] : state.end;
         const label = svg("text", { x: (x(f) + x(next)) / 2, y: H - 4, "text-anchor": "middle", "font-size": 11, fill: "#5c6675" });
