@@ -118,6 +118,9 @@ def test_other_clubs_reference_is_404(client, app, club_ref):
     url = f"/api/v1/references/{club_ref.reference_id}"
     assert client.get(url, headers=other.headers).status_code == 404
     assert client.delete(url, headers=other.headers).status_code == 404
+    assert client.get(url + "/motion.json", headers=other.headers).status_code == 404
+    moved = client.put(url + "/domain", headers=other.headers, json={"segments": [1, 9]})
+    assert moved.status_code == 404
     assert client.get("/api/v1/references", headers=other.headers).json()["items"] == []
 
 
