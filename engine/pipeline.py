@@ -21,7 +21,7 @@ import multiprocessing
 import os
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor, as_completed
 
 import numpy as np
 
@@ -52,7 +52,13 @@ from engine.stages.calibration import (
 )
 from engine.stages.candidates import estimate_candidates_chunk, frame_rngs
 from engine.stages.candidates.key_frames import choose_key_frames, key_span
-from engine.stages.foreground import ForegroundResult, extract_foreground, outline
+from engine.stages.foreground import (
+    Background,
+    ForegroundResult,
+    background_of,
+    extract_foreground,
+    outline,
+)
 from engine.stages.framing import first_frame_problems
 from engine.stages.perception import (
     Perception,
@@ -62,6 +68,7 @@ from engine.stages.perception import (
     readings,
 )
 from engine.stages.selection import SelectionSettings, select_and_refine
+from engine.threads import thread_count
 
 # What a service calls: the three steps, their outputs, and the parsers of its inputs.
 __all__ = [
@@ -115,9 +122,10 @@ def prepare(
     check_variation(reference.motion, domain)  # seed 002: the takes' spread, frame by frame
     load_s = time.perf_counter() - t0
     t0 = time.perf_counter()
-    perception = _perceive(video, s, on_progress)
+    perception, background = _perceive_beside_background(video, s, on_progress)
     perceive_s = time.perf_counter() - t0
-    r = run_stages_0_2(reference, video, s, perception=perception, on_progress=on_progress)
+    r = run_stages_0_2(reference, video, s, perception=perception, background=background,
+                       on_progress=on_progress)  # fmt: skip
     perception, offset = r.perception, offset + r.first_frame
     h, w = video.frames.shape[1:3]
     return Prepared(
@@ -351,9 +359,13 @@ def run_stages_0_2(
     settings: Settings | None = None,
     *,
     perception: Perception | None = None,
+    background: Background | None = None,
     on_progress: ProgressFn | None = None,
 ) -> Stages02:
     """Stages 0-2 of the thesis (4.1, 4.2, 4.5) on a loaded reference and video.
+
+    ``background`` is stage 0's background model of the video when the caller has it
+    (:func:`engine.stages.foreground.background_of`).
 
     With ``calibration.check_mirror`` stage 2 runs for the calibrated view and for the best
     view facing the other way, and the one with the lower mean cost E_C is kept (one frame
@@ -379,7 +391,7 @@ def run_stages_0_2(
     t0 = time.perf_counter()
     fg = extract_foreground(video.frames, s.foreground,
                             learned=None if perception is None else perception.mask,
-                            on_progress=on_progress)  # fmt: skip
+                            background=background, on_progress=on_progress)  # fmt: skip
     timing["foreground"] = time.perf_counter() - t0
     check_person_found(fg.flags, perception, s.perception.min_detected_fraction)
     t0 = time.perf_counter()
@@ -450,6 +462,22 @@ def _read_frames(
         raise InvalidInput(f"frames must be a range of >= 2 frames within 0..{video.n_frames}")
     cut = dataclasses.replace(video, frames=video.frames[a:b], timestamps_s=video.timestamps_s[a:b])
     return cut, a, int(video.n_frames)
+
+
+def _perceive_beside_background(
+    video: Video, s: Settings, on_progress: ProgressFn | None
+) -> tuple[Perception | None, Background | None]:
+    """The pose model's output and stage 0's background model, side by side on two threads
+    unless ``foreground.threads`` is 1: the model runs on one core and releases the GIL, and
+    the background does not need it. (None, None) without perception: the background
+    then comes with the rest of stage 0."""
+    if not s.perception.enabled:
+        return None, None
+    if thread_count(s.foreground.threads) == 1:
+        return _perceive(video, s, on_progress), None
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="coach-background") as pool:
+        background = pool.submit(background_of, video.frames, s.foreground)
+        return _perceive(video, s, on_progress), background.result()
 
 
 def _perceive(video: Video, s: Settings, on_progress: ProgressFn | None) -> Perception | None:

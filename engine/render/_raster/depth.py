@@ -19,7 +19,7 @@ from engine.render._raster.spans import (
 )
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def raster_parts(
     ends: np.ndarray,
     zends: np.ndarray,
@@ -94,7 +94,7 @@ def _is_edge(label: np.ndarray, cov: np.ndarray, body: np.ndarray, rr: int, cc: 
     return False
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def edge_mask(label: np.ndarray, cov: np.ndarray, body: np.ndarray, out: np.ndarray) -> None:
     """Visible part outlines of a rasterised box into ``out`` (h, w) bool."""
     h, w = label.shape
@@ -103,7 +103,7 @@ def edge_mask(label: np.ndarray, cov: np.ndarray, body: np.ndarray, out: np.ndar
             out[rr, cc] = _is_edge(label, cov, body, rr, cc)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _raster_image(
     ends: np.ndarray,
     zends: np.ndarray,
@@ -162,7 +162,7 @@ def _raster_image(
     return vmin, vmax
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def render_image(
     ends: np.ndarray,
     zends: np.ndarray,
@@ -229,7 +229,7 @@ def render_image(
     out_i[2] = ne
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def full_counts(
     ends: np.ndarray,
     zends: np.ndarray,

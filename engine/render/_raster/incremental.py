@@ -19,7 +19,7 @@ from engine.render._raster.spans import (
 )
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def part_counts(
     ends: np.ndarray,
     zends: np.ndarray,

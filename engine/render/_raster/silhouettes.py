@@ -12,7 +12,7 @@ from numba import njit
 from engine.render._raster.spans import _INF, _ceil, _cols, _floor, _insert_span, _rows, row_span
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def sil_counts(ends: np.ndarray, rad: np.ndarray, prefix: np.ndarray, out: np.ndarray) -> None:
     """Silhouette size and overlap with a target for many postures, without any image.
 
@@ -81,7 +81,7 @@ def _prefix_at(pr: np.ndarray, x: float) -> float:
     return pr[i] + (y - i) * (pr[i + 1] - pr[i])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def sil_counts_smooth(
     ends: np.ndarray, rad: np.ndarray, prefix: np.ndarray, sub: int, out: np.ndarray
 ) -> None:
@@ -146,7 +146,7 @@ def sil_counts_smooth(
         out[n, 1] = inter
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def fill_silhouettes(ends: np.ndarray, rad: np.ndarray, out: np.ndarray) -> None:
     """Write the silhouettes of many postures into ``out`` (N, H, W) bool (zeroed by caller)."""
     N, C = ends.shape[0], ends.shape[1]

@@ -16,6 +16,7 @@ from engine.render import capsules
 from engine.render.camera import Camera
 from engine.stages.alignment.settings import AlignmentSettings
 from engine.stages.foreground import contour
+from engine.threads import map_in_threads
 
 
 def rotation_samples(yaw_deg: tuple[float, ...], tilt_deg: tuple[float, ...]) -> np.ndarray:
@@ -133,10 +134,12 @@ def cost_entries(
     n_v, n_r = entries.shape
     cost = np.full((n_v, n_r), np.inf)
     best = np.full((n_v, n_r, max(keep, 1)), -1, dtype=int)
-    for tv in range(n_v):
+
+    def row(tv: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """Video frame tv's evaluated columns, their costs and best samples (K, n)."""
         ts = np.flatnonzero(entries[tv])
         if ts.size == 0:
-            continue
+            return None
         si = np.broadcast_to(np.arange(n_s)[:, None], (n_s, ts.size)) if samples is None \
             else samples[tv, ts].T  # fmt: skip
         j = posed[si, ts[None, :]].reshape(-1, 17, 3)
@@ -153,8 +156,13 @@ def cost_entries(
         d = d.reshape(si.shape)
         order = np.argsort(d, axis=0, kind="stable")[: max(keep, 1)]
         cols = np.arange(ts.size)
-        best[tv, ts] = si[order, cols[None, :]].T
-        cost[tv, ts] = d[order[0], cols]
+        return ts, d[order[0], cols], si[order, cols[None, :]]
+
+    # video frames are independent: threads share them (the kernels release the GIL)
+    for tv, out in enumerate(map_in_threads(row, range(n_v), settings.threads)):
+        if out is not None:
+            ts, d_best, s_best = out
+            cost[tv, ts], best[tv, ts] = d_best, s_best.T
         if on_progress is not None:
             on_progress((tv + 1) / n_v)
     return cost, (best if keep > 0 else best[..., 0])

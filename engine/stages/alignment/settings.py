@@ -79,6 +79,9 @@ class AlignmentSettings:
         (:func:`engine.stages.repetitions.performances`). Beyond the thesis, whose stage 2
         stretches one performance over the whole video. Needs the pose model; the user may
         still pick frames himself (``coach analyze --frames``), which turns this off.
+    threads : int
+        Threads sharing the video frames of the cost matrix (0: every core this process may
+        use; :mod:`engine.threads`). The result does not depend on it.
     """
 
     k: float = 10.0
@@ -101,6 +104,7 @@ class AlignmentSettings:
     keypoint_tau: float = 0.1
     keypoint_offsets: bool = False
     repetitions: bool = True
+    threads: int = 0
 
 
 @dataclass(frozen=True)

@@ -38,13 +38,14 @@ background pixels were never seen.
 
 from engine.stages.foreground.background import Background, estimate_background
 from engine.stages.foreground.edges import contour, interior_edges, outline, skin_mask
-from engine.stages.foreground.extract import extract_foreground
+from engine.stages.foreground.extract import background_of, extract_foreground
 from engine.stages.foreground.regions import grabcut_seeded
 from engine.stages.foreground.segment import fuse_learned_mask, segment_frame
 from engine.stages.foreground.settings import ForegroundResult, ForegroundSettings
 
 __all__ = [
     "Background",
+    "background_of",
     "ForegroundResult",
     "ForegroundSettings",
     "contour",

@@ -15,6 +15,7 @@ from engine.stages.foreground.background import Background, estimate_background
 from engine.stages.foreground.edges import interior_edges, outline, skin_mask
 from engine.stages.foreground.segment import fuse_learned_mask, segment_frame
 from engine.stages.foreground.settings import ForegroundResult, ForegroundSettings
+from engine.threads import map_in_threads
 
 ProgressFn = Callable[[str, float], None]
 
@@ -28,6 +29,7 @@ def extract_foreground(
     settings: ForegroundSettings = _DEFAULTS,
     *,
     learned: np.ndarray | None = None,
+    background: Background | None = None,
     on_progress: ProgressFn | None = None,
 ) -> ForegroundResult:
     """Body regions S'_t' of a static-camera video (thesis 4.1).
@@ -41,6 +43,9 @@ def extract_foreground(
         The learned person mask (:attr:`engine.stages.perception.Perception.mask`), fused
         where it found a person when ``settings.fuse_learned``; a frame whose mask is empty
         is flagged ``no_detection`` and keeps the thesis' region.
+    background : Background, optional
+        :func:`background_of` these frames, when the caller computed it already (beside the
+        pose model, :func:`engine.pipeline.prepare`).
     on_progress : callable(stage, fraction), optional
         Called with ``"foreground"`` and the fraction of frames done.
 
@@ -57,10 +62,7 @@ def extract_foreground(
     s = settings
     timing = {"background": 0.0, "difference": 0.0, "grabcut": 0.0, "skin": 0.0}
     t0 = time.perf_counter()
-    bg = estimate_background(
-        f, samples=s.background_samples, threshold=s.threshold, blur_sigma_px=s.blur_sigma_px,
-        min_free_fraction=s.min_free_fraction,
-    )  # fmt: skip
+    bg = background_of(f, s) if background is None else background
     timing["background"] = time.perf_counter() - t0
     n, h, w = f.shape[:3]
     sil = np.zeros((n, h, w), bool)
@@ -69,24 +71,45 @@ def extract_foreground(
     flags: list[tuple[str, ...]] = []
     grow = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (15, 15))
     source = _nearest_detection(learned, s.learned_max_gap) if learned is not None else None
-    for i in range(n):
-        mask, raw, blobs = _region(f, i, bg, s, learned, source, timing)
+
+    def frame(i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[str, ...], dict]:
+        """Frame i's region, skin, edges (H, W) and flags, and the seconds per step."""
+        t: dict[str, float] = {"difference": 0.0, "grabcut": 0.0, "skin": 0.0}
+        mask, raw, blobs = _region(f, i, bg, s, learned, source, t)
         t0 = time.perf_counter()
+        sk = np.zeros((h, w), bool)
         if s.skin and mask.any():
-            skin[i] = _skin_near(f[i], mask, raw, grow)
-            mask = mask | skin[i]
-        timing["skin"] += time.perf_counter() - t0
-        sil[i] = mask
-        edges[i] = outline(mask, skin[i])
+            sk = _skin_near(f[i], mask, raw, grow)
+            mask = mask | sk
+        t["skin"] += time.perf_counter() - t0
+        e = outline(mask, sk)
         if s.interior_edges:
-            edges[i] |= interior_edges(f[i], mask, s.canny_thresholds)
+            e |= interior_edges(f[i], mask, s.canny_thresholds)
         fl = _flags(mask, raw, blobs, bg.never, s, grow)
         if learned is not None and not learned[i].any():
             fl = (*fl, "no_detection")
+        return mask, sk, e, fl, t
+
+    # frames are independent given the background: threads share them (OpenCV's GrabCut
+    # and the numpy work release the GIL); the seconds below add up the threads' time
+    for i, (mask, sk, e, fl, t) in enumerate(map_in_threads(frame, range(n), s.threads)):
+        sil[i], skin[i], edges[i] = mask, sk, e
         flags.append(fl)
+        for k, v in t.items():
+            timing[k] += v
         if on_progress is not None:
             on_progress("foreground", (i + 1) / n)
     return ForegroundResult(sil, edges, skin, bg.image, tuple(flags), timing)
+
+
+def background_of(frames: np.ndarray, settings: ForegroundSettings = _DEFAULTS) -> Background:
+    """Stage 0's background model of ``frames`` (T', H, W, 3) with ``settings``
+    (:func:`~engine.stages.foreground.background.estimate_background`)."""
+    s = settings
+    return estimate_background(
+        frames, samples=s.background_samples, threshold=s.threshold,
+        blur_sigma_px=s.blur_sigma_px, min_free_fraction=s.min_free_fraction,
+    )  # fmt: skip
 
 
 def _checked_frames(frames: np.ndarray, learned: np.ndarray | None) -> np.ndarray:

@@ -83,6 +83,9 @@ class ForegroundSettings:
         frame where it found him, up to this many frames away, with its core eroded and its
         band widened by 1 px (at 240 rows) per frame of distance (P3: many frames lost, the
         grey clothes barely differ from the wall). Farther, the thesis' region.
+    threads : int
+        Threads sharing the frames once the background is known (0: every core this
+        process may use; :mod:`engine.threads`). The result does not depend on it.
     """
 
     background_samples: int = 30
@@ -106,6 +109,7 @@ class ForegroundSettings:
     learned_core_px: float = 2.0
     learned_band_px: float = 4.0
     learned_max_gap: int = 15
+    threads: int = 0
 
 
 @dataclass(frozen=True)

@@ -170,6 +170,16 @@ def test_align_recovers_a_rendered_warp():
     assert np.array_equal(res.cost, same.cost)
 
 
+def test_threads_share_the_frames_without_changing_the_result():
+    from engine.stages.alignment import AlignmentSettings, align
+
+    ref, shape, cam, sil, _ = _rendered_warp()
+    one = align(ref, shape, cam, sil, settings=AlignmentSettings(threads=1))
+    two = align(ref, shape, cam, sil, settings=AlignmentSettings(threads=2))
+    assert np.array_equal(one.cost, two.cost) and np.array_equal(one.sample, two.sample)
+    assert np.array_equal(one.C, two.C)
+
+
 def test_skin_contours_join_the_edges_only_when_asked():
     from engine.stages.alignment import AlignmentSettings, align
 

@@ -154,6 +154,20 @@ def test_silhouettes_do_not_depend_on_what_ran_before():
     np.testing.assert_array_equal(extract_foreground(frames).silhouettes, first)
 
 
+def test_threads_share_the_frames_without_changing_the_result():
+    # P2's first frames need GrabCut, whose RNG is per thread and reset before each call
+    from engine.io.video import read_video
+    from engine.stages.perception import MediaPipePose, perceive
+
+    frames = read_video(BENCH_CASES / "P2_take_64_30_vs_64_29" / "video.mp4", max_frames=24).frames
+    mask = perceive(frames, MediaPipePose()).mask
+    one = extract_foreground(frames, ForegroundSettings(threads=1), learned=mask)
+    two = extract_foreground(frames, ForegroundSettings(threads=2), learned=mask)
+    for a, b in [(one.silhouettes, two.silhouettes), (one.edges, two.edges), (one.skin, two.skin)]:
+        np.testing.assert_array_equal(a, b)
+    assert one.flags == two.flags
+
+
 def test_fragment_near_the_body_is_kept_only_over_seen_background():
     # a lower leg cut off by a thin band the difference missed (trousers crossing the line
     # where wall meets floor) belongs to the body; a fragment far away, or one that is only a
