@@ -3,7 +3,8 @@
 Why numba: the work is per image row and per pixel of small, data-dependent boxes (one box
 per posture sample), which numpy can only express with large temporary arrays per sample; a
 profile of the numpy version spent nearly all its time allocating and masking those
-temporaries. Every kernel here is a plain loop over rows and pixels.
+temporaries. Every kernel here is a plain loop over rows and pixels. The kernels called from
+Python are compiled ``nogil``: stage 2 scores its video frames on threads (:mod:`engine.threads`).
 
     spans        where a row meets a capsule, depth of its front surface (inlined helpers)
     silhouettes  silhouette size and overlap from row spans, no image (d_A); silhouette images
