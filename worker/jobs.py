@@ -49,7 +49,7 @@ from engine.errors import EngineError
 from engine.reference.domain import Domain
 from engine.settings import Settings
 from worker import lease, metrics
-from worker.contract import AnalysisFolder, AnalysisJob
+from worker.contract import AnalysisFolder, AnalysisJob, file_age_s, storage_now
 
 log = logging.getLogger("coach.worker")
 
@@ -334,8 +334,13 @@ def run_candidates(
     pipeline: ModuleType = engine_pipeline,
     publish: Publish | None = None,
     max_crashes: int = MAX_CRASHES,
+    provisional_min_wait_s: float | None = None,
 ) -> Path:
-    """Stage 3 on chunk ``index`` of ``n_chunks`` -> ``stages/candidates-<i>-of-<n>.npz``."""
+    """Stage 3 on chunk ``index`` of ``n_chunks`` -> ``stages/candidates-<i>-of-<n>.npz``.
+
+    ``provisional_min_wait_s``: see :func:`write_provisional` (default
+    :data:`PROVISIONAL_MIN_WAIT_S`).
+    """
     if not 0 <= index < n_chunks:
         raise ValueError(f"chunk index must be in [0, {n_chunks}), got {index}")
     paths = AnalysisFolder(job.work_dir)
@@ -344,11 +349,18 @@ def run_candidates(
         return _skipped(job, "candidates", out)
     check_cancel(job)
     with lease.attempt(job.work_dir, out, max_crashes=max_crashes):
-        return _candidates(job, index, n_chunks, pipeline=pipeline, publish=publish)
+        return _candidates(job, index, n_chunks, pipeline=pipeline, publish=publish,
+                           min_wait_s=provisional_min_wait_s)  # fmt: skip
 
 
 def _candidates(
-    job: AnalysisJob, index: int, n_chunks: int, *, pipeline: ModuleType, publish: Publish | None
+    job: AnalysisJob,
+    index: int,
+    n_chunks: int,
+    *,
+    pipeline: ModuleType,
+    publish: Publish | None,
+    min_wait_s: float | None,
 ) -> Path:
     paths = AnalysisFolder(job.work_dir)
     out = paths.chunk(index, n_chunks)
@@ -376,7 +388,7 @@ def _candidates(
     check_cancel(job)
     write_atomic(out, chunk.save)
     if pipeline is engine_pipeline:  # a stand-in pipeline of the tests has no stage 4 to run
-        write_provisional(job, n_chunks, prepared, settings)
+        write_provisional(job, n_chunks, prepared, settings, min_wait_s=min_wait_s)
     _stage_done(
         job,
         "candidates",
@@ -387,26 +399,33 @@ def _candidates(
     return out
 
 
-#: A provisional result is worth its stage-4 run only while at least this share of the video's
-#: frames still waits for stage 3; nearer the end the final result is about to come.
-PROVISIONAL_MIN_LEFT = 0.25
+#: A provisional result is worth its stage-4 run (about 0.5 s on P2) only when the final one is
+#: expected at least this many seconds later: a preview that the final result replaces within
+#: moments is work for nothing.
+PROVISIONAL_MIN_WAIT_S = 5.0
 
 
 def write_provisional(
-    job: AnalysisJob, n_chunks: int, prepared: Any, settings: Settings
+    job: AnalysisJob,
+    n_chunks: int,
+    prepared: Any,
+    settings: Settings,
+    *,
+    min_wait_s: float | None = None,
 ) -> Path | None:
     """Stage 4 on the whole segments the finished chunks cover -> ``provisional.json``
     (:func:`engine.provisional.select_provisional`), when they cover more segments than the
-    one already written and the final result is not near. Never fails the chunk: the
-    provisional result is a preview, and the final one does not depend on it."""
+    one already written and the rest of stage 3 is expected to take at least ``min_wait_s``
+    (:func:`stage3_left_s`; default :data:`PROVISIONAL_MIN_WAIT_S`). Never fails the chunk:
+    the provisional result is a preview, and the final one does not depend on it."""
     paths = AnalysisFolder(job.work_dir)
+    wait = PROVISIONAL_MIN_WAIT_S if min_wait_s is None else min_wait_s
     try:
         done = [p for p in paths.chunks(n_chunks) if p.exists()]
         chunks = [engine_pipeline.CandidateChunk.load(p) for p in done]
         n_done = engine_provisional.finished_prefix(prepared, chunks)
         k, n = engine_provisional.covered_segments(prepared, n_done)
-        waiting = prepared.n_frames - sum(len(c.frames) for c in chunks)
-        if paths.result.exists() or waiting < PROVISIONAL_MIN_LEFT * prepared.n_frames:
+        if paths.result.exists() or stage3_left_s(paths, prepared, n_chunks, chunks) < wait:
             return None
         old = read_json(paths.provisional)
         if k == 0 or (old is not None and old["provisional"]["segments"] >= k):
@@ -423,6 +442,30 @@ def write_provisional(
     log_event("analysis.provisional", analysis_id=job.analysis_id, segments=k, frames=n,
               seconds=round(time.monotonic() - started, 2))  # fmt: skip
     return paths.provisional
+
+
+def stage3_left_s(
+    paths: AnalysisFolder, prepared: Any, n_chunks: int, chunks: list[Any]
+) -> float:
+    """Expected seconds until every chunk of stage 3 is done: each unfinished chunk's frames
+    at the finished ``chunks``' seconds per frame, less how long it has run if it runs (the
+    age of its crash ledger, :func:`worker.lease.attempt`), shared by the chunks running now
+    (at least one). Chunk order and worker count then no longer decide whether a preview
+    comes: a frame count cannot tell two chunks just started from two about to end."""
+    frames = sum(len(c.frames) for c in chunks)
+    per_frame = sum(float(c.seconds) for c in chunks) / max(frames, 1)
+    now = storage_now(paths.work_dir)
+    work, running = 0.0, 0
+    for frames_of, out in zip(prepared.chunks(n_chunks), paths.chunks(n_chunks), strict=False):
+        if out.exists():
+            continue
+        need = len(frames_of) * per_frame
+        ran = file_age_s(paths.attempts(out), now)
+        if ran is not None:
+            running += 1
+            need = max(need - ran, 0.0)
+        work += need
+    return work / max(running, 1)
 
 
 def run_select(
@@ -482,6 +525,7 @@ def run_all(
     pipeline: ModuleType = engine_pipeline,
     publish: Publish | None = None,
     max_crashes: int = MAX_CRASHES,
+    provisional_min_wait_s: float | None = None,
 ) -> Path:
     """Every stage in order in this process (embedded sequential mode); returns result.json.
 
@@ -494,7 +538,7 @@ def run_all(
             return AnalysisFolder(job.work_dir).result
         run_prepare(job, **run)
         for i in range(n_chunks):
-            run_candidates(job, i, n_chunks, **run)
+            run_candidates(job, i, n_chunks, **run, provisional_min_wait_s=provisional_min_wait_s)
         return run_select(job, n_chunks, **run)
     except (EngineError, Cancelled, lease.RepeatedCrash) as exc:
         record_failure(job, exc)

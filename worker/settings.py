@@ -10,6 +10,8 @@ COACH_BROKER_URL           ``embedded`` (default): kombu's filesystem transport 
 COACH_RESULT_BACKEND       default: ``file://$COACH_DATA_DIR/celery/results`` when embedded,
                            the broker URL when it is Redis
 COACH_CHUNKS               stage-3 chunks per analysis when the settings do not say (8)
+COACH_PROVISIONAL_MIN_WAIT_S  the first segments' provisional result is computed only when
+                           the rest of stage 3 is expected to take at least this long, s (5)
 COACH_VISIBILITY_TIMEOUT_S Redis visibility timeout, seconds (7200): when Redis hands an
                            unacknowledged message out again by itself; the API's recovery
                            (``app.core.recovery``) acts long before, on the heartbeat
@@ -106,6 +108,7 @@ class WorkerSettings:
     heartbeat_s: float = 5.0
     lost_after_s: float = 60.0
     max_crashes: int = 2
+    provisional_min_wait_s: float = 5.0
     max_retries: int = 5
     sequential: bool = False
     limits_s: dict[str, tuple[int, int]] = field(default_factory=lambda: dict(DEFAULT_LIMITS_S))
@@ -180,6 +183,9 @@ class WorkerSettings:
         max_crashes = _env_int(env, "COACH_MAX_CRASHES", 2)
         if max_crashes < 1:
             raise ValueError(f"COACH_MAX_CRASHES must be >= 1, got {max_crashes}")
+        min_wait = _env_float(env, "COACH_PROVISIONAL_MIN_WAIT_S", 5.0)
+        if min_wait < 0:
+            raise ValueError(f"COACH_PROVISIONAL_MIN_WAIT_S must be >= 0, got {min_wait}")
         return cls(
             data_dir=root,
             broker_url=broker,
@@ -190,6 +196,7 @@ class WorkerSettings:
             heartbeat_s=heartbeat,
             lost_after_s=lost_after,
             max_crashes=max_crashes,
+            provisional_min_wait_s=min_wait,
             max_retries=_env_int(env, "COACH_MAX_RETRIES", 5),
             sequential=_env_bool(env, "COACH_SEQUENTIAL", SEQUENTIAL_WHEN_EMBEDDED and embedded),
             limits_s=limits,

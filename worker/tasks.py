@@ -202,7 +202,8 @@ def analyze(self, job_json: dict) -> dict:
         if not jobs.start(job):
             return {"analysis_id": job.analysis_id, "launched": False}
         if _S.sequential:
-            path = jobs.run_all(job, n_chunks, **_stage_kwargs(self))
+            path = jobs.run_all(job, n_chunks, **_stage_kwargs(self),
+                                provisional_min_wait_s=_S.provisional_min_wait_s)  # fmt: skip
             self.update_state(state="SUCCESS", meta={"result_path": str(path)})
             return {"analysis_id": job.analysis_id, "result_path": str(path)}
         return launch(job, n_chunks, root_id=self.request.id)
@@ -275,7 +276,10 @@ def candidates(self, job_json: dict, index: int, n_chunks: int) -> str:
             self,
             job,
             "candidates",
-            lambda: jobs.run_candidates(job, index, n_chunks, **_stage_kwargs(self)),
+            lambda: jobs.run_candidates(
+                job, index, n_chunks, **_stage_kwargs(self),
+                provisional_min_wait_s=_S.provisional_min_wait_s,
+            ),  # fmt: skip
         )
     )
 

@@ -117,7 +117,8 @@ def server(tmp_path_factory) -> Server:
                COACH_SSE_POLL_S="0.3", COACH_REFLECT_INTERVAL_S="1",
                COACH_RATE_LIMIT_PER_S="1000", COACH_RATE_LIMIT_BURST="1000",
                COACH_ENVIRONMENT="development", COACH_BROKER_URL="embedded",
-               PYOPENGL_PLATFORM="egl")  # fmt: skip
+               # the test clips' stage 3 takes seconds: their previews come at any wait
+               COACH_PROVISIONAL_MIN_WAIT_S="0", PYOPENGL_PLATFORM="egl")  # fmt: skip
     log = open(data / "serve.log", "wb")  # noqa: SIM115 - closed at teardown
     proc = subprocess.Popen(
         [sys.executable, "-m", "app.cli", "serve", "--data-dir", str(data), "--port", str(port)],

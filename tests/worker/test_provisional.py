@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 
 import pytest
 
@@ -28,8 +29,8 @@ def test_the_first_segment_is_written_before_the_last_chunk_runs(job, caplog) ->
     jobs.start(job)
     jobs.run_prepare(job)
     seen = []
-    for i in range(4):
-        jobs.run_candidates(job, i, 4)
+    for i in range(4):  # this clip's stage 3 takes seconds: a preview at any wait
+        jobs.run_candidates(job, i, 4, provisional_min_wait_s=0.0)
         seen.append(jobs.read_json(paths.provisional))
     assert seen[0] is None, "chunk 0 ends before the first segment does"
     doc = seen[1]
@@ -54,3 +55,37 @@ def test_a_broken_chunk_file_costs_the_preview_not_the_chunk(job, caplog) -> Non
     out = jobs.run_candidates(job, 1, 4)
     assert out.exists() and not paths.provisional.exists()
     assert "analysis.provisional_failed" in caplog.text
+
+
+def test_no_preview_when_the_final_result_is_moments_away(job) -> None:
+    paths = AnalysisFolder(job.work_dir)
+    jobs.start(job)
+    jobs.run_prepare(job)
+    for i in range(3):  # chunk 2 completes the first segment, as above
+        jobs.run_candidates(job, i, 4, provisional_min_wait_s=3600.0)
+    assert not paths.provisional.exists()
+
+
+def test_the_wait_left_counts_the_running_chunks(job) -> None:
+    from engine.pipeline import CandidateChunk, Prepared
+
+    paths = AnalysisFolder(job.work_dir)
+    jobs.start(job)
+    jobs.run_prepare(job)
+    jobs.run_candidates(job, 0, 4)
+    prepared = Prepared.load(paths.prepared)
+    chunks = [CandidateChunk.load(paths.chunk(0, 4))]
+    per_frame = chunks[0].seconds / len(chunks[0].frames)
+    sizes = [len(r) for r in prepared.chunks(4)]
+    # nothing runs: the three chunks left, one after another
+    left = jobs.stage3_left_s(paths, prepared, 4, chunks)
+    assert left == pytest.approx(sum(sizes[1:]) * per_frame)
+    # chunks 1 and 2 run (their crash ledgers), chunk 1 for long enough to be nearly done
+    for i, age in ((1, sizes[1] * per_frame), (2, 0.0)):
+        ledger = paths.attempts(paths.chunk(i, 4))
+        ledger.parent.mkdir(parents=True, exist_ok=True)
+        ledger.write_text("1 test")
+        mtime = ledger.stat().st_mtime - age
+        os.utime(ledger, (mtime, mtime))
+    left = jobs.stage3_left_s(paths, prepared, 4, chunks)
+    assert left == pytest.approx((sizes[2] + sizes[3]) * per_frame / 2, rel=0.05, abs=0.05)

@@ -40,6 +40,12 @@ def test_limits_from_env_and_validation(tmp_path):
         WorkerSettings.from_env({"COACH_CHUNKS": "0"})
     with pytest.raises(ValueError, match="COACH_VISIBILITY_TIMEOUT_S"):
         WorkerSettings.from_env({"COACH_VISIBILITY_TIMEOUT_S": "soon"})
+    assert WorkerSettings.from_env({}).provisional_min_wait_s == 5.0
+    assert WorkerSettings.from_env(
+        {"COACH_PROVISIONAL_MIN_WAIT_S": "0"}
+    ).provisional_min_wait_s == 0.0
+    with pytest.raises(ValueError, match="COACH_PROVISIONAL_MIN_WAIT_S"):
+        WorkerSettings.from_env({"COACH_PROVISIONAL_MIN_WAIT_S": "-1"})
 
 
 def test_heartbeat_settings_from_env_and_validation(tmp_path):
