@@ -37,8 +37,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument(
         "--workers", type=int, default=len(os.sched_getaffinity(0)),
-        help="processes for the posture candidates, the longest stage (default: one per "
-        "core); the result is the same with any number",
+        help="cores to use: processes for the posture candidates, the longest stage, and "
+        "threads for stages 0-2 (default: every core); the result is the same with any number",
     )  # fmt: skip
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.set_defaults(func=run)
@@ -103,7 +103,10 @@ def run(args: argparse.Namespace) -> int:
     n = read_video_count(args.video)
     frames = parse_frames(args.frames, n) if args.frames else None
     preset = args.preset or ("fast" if args.fast else "default")
-    settings = Settings.from_dict({"preset": preset, "seed": args.seed})
+    settings = Settings.from_dict({
+        "preset": preset, "seed": args.seed,
+        "foreground": {"threads": args.workers}, "alignment": {"threads": args.workers},
+    })  # fmt: skip
     doc = analyze(
         args.reference, args.video, settings, domain=find_domain(args.reference),
         frames=frames, workers=args.workers, on_progress=_progress(args.quiet),

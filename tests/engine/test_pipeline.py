@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import time
 
 import numpy as np
 import pytest
@@ -252,6 +253,39 @@ def test_analyze_command_refuses_a_worker_count_below_one(case_dir, tmp_path, ca
     assert main([*cmd, "--workers", "0"]) == 2
     assert "--workers must be >= 1" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_analyze_with_one_worker_uses_one_core(case_dir, tmp_path) -> None:
+    # --workers bounds the cores: no stage-3 process pool, and no stage 0-2 threads either
+    import threading
+
+    from engine.cli import main
+
+    seen: set[str] = set()
+    done = threading.Event()
+
+    def watch() -> None:
+        while not done.is_set():
+            seen.update(t.name for t in threading.enumerate())
+            time.sleep(0.005)
+
+    watcher = threading.Thread(target=watch)
+    watcher.start()
+    try:
+        out = tmp_path / "r.json"
+        cmd = ["analyze", case_dir["reference"], case_dir["video"], "--out", str(out), "--quiet",
+               "--fast", "--workers", "1"]  # fmt: skip
+        assert main(cmd) == 0 and out.exists()
+        assert not {n for n in seen if n.startswith(("coach-stage", "coach-background"))}, seen
+        # the watcher does see the stages' threads when they run
+        from engine.threads import map_in_threads
+
+        assert list(map_in_threads(lambda i: time.sleep(0.05) or i, range(4), 2)) == [0, 1, 2, 3]
+        time.sleep(0.02)
+        assert any(n.startswith("coach-stage") for n in seen), seen
+    finally:
+        done.set()
+        watcher.join()
 
 
 def test_a_video_with_nobody_in_it_fails_with_a_plain_message(case_dir, tmp_path) -> None:
