@@ -11,8 +11,10 @@ results do not depend on the number of threads.
 from __future__ import annotations
 
 import os
+from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
+from itertools import islice
 from typing import TypeVar
 
 T = TypeVar("T")
@@ -31,16 +33,21 @@ def map_in_threads(fn: Callable[[T], R], items: Iterable[T], threads: int) -> It
 
     Results are yielded as they come, so a caller can report progress and stop between
     items: when the consumer raises (a cancelled analysis) or stops iterating, items not yet
-    started are dropped and the running ones finish before this returns.
+    started are dropped and the running ones finish before this returns. At most
+    ``2 threads`` items are in flight, so results wait for their consumer a few at a time
+    (stage 0's are three images per frame), not a whole video's worth.
     """
     n = thread_count(threads)
     if n == 1:
         yield from map(fn, items)
         return
+    todo = iter(items)
     pool = ThreadPoolExecutor(max_workers=n, thread_name_prefix="coach-stage")
     try:
-        futures = [pool.submit(fn, item) for item in items]
-        for f in futures:
-            yield f.result()
+        flight = deque(pool.submit(fn, item) for item in islice(todo, 2 * n))
+        while flight:
+            result = flight.popleft().result()
+            flight.extend(pool.submit(fn, item) for item in islice(todo, 1))
+            yield result
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
