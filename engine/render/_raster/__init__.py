@@ -7,7 +7,8 @@ temporaries. Every kernel here is a plain loop over rows and pixels. The kernels
 Python are compiled ``nogil``: stage 2 scores its video frames on threads (:mod:`engine.threads`).
 
     spans        where a row meets a capsule, depth of its front surface (inlined helpers)
-    silhouettes  silhouette size and overlap from row spans, no image (d_A); silhouette images
+    silhouettes  silhouette size and overlap from row spans, no image (d_A), of whole postures
+                 or of one part joining a fixed body; silhouette images
     depth        depth-ordered render: part labels, visible outlines, d_S counts of postures
     incremental  the change of the d_S counts when one part moves (PartScorer)
 
@@ -30,7 +31,13 @@ Conventions shared by all kernels:
 
 from engine.render._raster.depth import edge_mask, full_counts, raster_parts, render_image
 from engine.render._raster.incremental import part_counts
-from engine.render._raster.silhouettes import fill_silhouettes, sil_counts, sil_counts_smooth
+from engine.render._raster.silhouettes import (
+    fill_silhouettes,
+    part_sil_counts,
+    row_unions,
+    sil_counts,
+    sil_counts_smooth,
+)
 from engine.render._raster.spans import row_span
 
 __all__ = [
@@ -38,9 +45,11 @@ __all__ = [
     "fill_silhouettes",
     "full_counts",
     "part_counts",
+    "part_sil_counts",
     "raster_parts",
     "render_image",
     "row_span",
+    "row_unions",
     "sil_counts",
     "sil_counts_smooth",
 ]

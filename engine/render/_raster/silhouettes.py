@@ -51,22 +51,160 @@ def sil_counts(ends: np.ndarray, rad: np.ndarray, prefix: np.ndarray, out: np.nd
                     )
                     if i0 <= i1:
                         m = _insert_span(lo, hi, m, i0, i1)
-            if m == 0:
-                continue
-            s = int(lo[0])
-            t = int(hi[0])
-            pr = prefix[v]
-            for j in range(1, m + 1):
-                if j < m and lo[j] <= t + 1:
-                    t = max(t, int(hi[j]))
-                    continue
-                area += t - s + 1
-                inter += pr[t + 1] - pr[s]
-                if j < m:
-                    s = int(lo[j])
-                    t = int(hi[j])
+            a, i = _union_counts(lo, hi, m, prefix[v])
+            area += a
+            inter += i
         out[n, 0] = area
         out[n, 1] = inter
+
+
+@njit(cache=True, inline="always")
+def _union_counts(lo: np.ndarray, hi: np.ndarray, m: int, pr: np.ndarray) -> tuple:
+    """Pixels of one row in the union of the first ``m`` column spans (sorted by start),
+    and how many of them are target pixels (``pr``: the row's prefix sums, (W + 1,))."""
+    area = 0
+    inter = 0
+    if m == 0:
+        return area, inter
+    s = int(lo[0])
+    t = int(hi[0])
+    for j in range(1, m + 1):
+        if j < m and lo[j] <= t + 1:
+            t = max(t, int(hi[j]))
+            continue
+        area += t - s + 1
+        inter += pr[t + 1] - pr[s]
+        if j < m:
+            s = int(lo[j])
+            t = int(hi[j])
+    return area, inter
+
+
+@njit(cache=True, nogil=True)
+def row_unions(
+    ends: np.ndarray,
+    rad: np.ndarray,
+    caps: np.ndarray,
+    prefix: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    n_row: np.ndarray,
+    row_counts: np.ndarray,
+) -> tuple:
+    """Each row's union of the column spans of capsules ``caps`` of one posture, as
+    disjoint spans: the fixed body that :func:`part_sil_counts` adds a moving part to.
+
+    Parameters
+    ----------
+    ends : (C, 2, 2) float64; rad : (C,) float64, pixels
+    prefix : (H, W + 1) int32, row prefix sums of the target silhouette
+    lo, hi : (H, len(caps)) float64 receive each row's spans, sorted and disjoint; n_row :
+    (H,) int64, zeroed by the caller, receives their number; row_counts : (H, 2) int64
+    receives each row's (pixels, target pixels)
+
+    Returns (|A|, |A and A'|) of the whole union.
+    """
+    H, W = prefix.shape[0], prefix.shape[1] - 1
+    area = 0
+    inter = 0
+    for k in range(caps.shape[0]):
+        c = caps[k]
+        v0, v1 = _rows(ends[c, 0, 1], ends[c, 1, 1], rad[c], 0, H - 1)
+        for v in range(v0, v1 + 1):
+            i0, i1 = _cols(ends[c, 0, 0], ends[c, 0, 1], ends[c, 1, 0], ends[c, 1, 1], rad[c],
+                           v, 0, W - 1)  # fmt: skip
+            if i0 <= i1:
+                n_row[v] = _insert_span(lo[v], hi[v], n_row[v], i0, i1)
+    for v in range(H):
+        m = n_row[v]
+        if m == 0:
+            continue
+        a, i = _union_counts(lo[v], hi[v], m, prefix[v])
+        row_counts[v, 0] = a
+        row_counts[v, 1] = i
+        area += a
+        inter += i
+        # keep the merged spans only: fewer to merge again per moving sample
+        k = 0
+        for j in range(1, m):
+            if lo[v, j] <= hi[v, k] + 1:
+                hi[v, k] = max(hi[v, k], hi[v, j])
+            else:
+                k += 1
+                lo[v, k] = lo[v, j]
+                hi[v, k] = hi[v, j]
+        n_row[v] = k + 1
+    return area, inter
+
+
+@njit(cache=True, nogil=True)
+def part_sil_counts(
+    ends: np.ndarray,
+    rad: np.ndarray,
+    caps: np.ndarray,
+    prefix: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    n_row: np.ndarray,
+    row_counts: np.ndarray,
+    area0: int,
+    inter0: int,
+    out: np.ndarray,
+) -> None:
+    """(|A|, |A and A'|) of samples of the capsules ``caps`` joining a fixed body, from row
+    spans (d_A of :class:`~engine.render.capsules.PartScorer` without d_E).
+
+    Only the rows a sample's capsules meet are merged again with the fixed spans: O(moving
+    rows x spans) per sample, no image. Counts the same pixels as :func:`sil_counts` of the
+    whole posture.
+
+    Parameters
+    ----------
+    ends : (S, C, 2, 2) float64; only rows ``caps`` are read
+    rad : (C,) float64, pixels
+    lo, hi, n_row, row_counts : the fixed body, from :func:`row_unions`
+    area0, inter0 : its totals
+    out : (S, 2) int64 receives (|A|, |A and A'|)
+    """
+    S = ends.shape[0]
+    H, W = prefix.shape[0], prefix.shape[1] - 1
+    nc = caps.shape[0]
+    K = lo.shape[1] + nc
+    blo = np.empty(K)
+    bhi = np.empty(K)
+    rlo = np.empty(nc, np.int64)
+    rhi = np.empty(nc, np.int64)
+    for n in range(S):
+        e = ends[n]
+        vmin = H
+        vmax = -1
+        for k in range(nc):
+            c = caps[k]
+            rlo[k], rhi[k] = _rows(e[c, 0, 1], e[c, 1, 1], rad[c], 0, H - 1)
+            vmin = min(vmin, rlo[k])
+            vmax = max(vmax, rhi[k])
+        add_a = 0
+        add_i = 0
+        for v in range(vmin, vmax + 1):
+            m0 = n_row[v]
+            for j in range(m0):
+                blo[j] = lo[v, j]
+                bhi[j] = hi[v, j]
+            m = m0
+            for k in range(nc):
+                if rlo[k] <= v <= rhi[k]:
+                    c = caps[k]
+                    i0, i1 = _cols(e[c, 0, 0], e[c, 0, 1], e[c, 1, 0], e[c, 1, 1], rad[c], v,
+                                   0, W - 1)  # fmt: skip
+                    if i0 <= i1:
+                        m = _insert_span(blo, bhi, m, i0, i1)
+            if m == m0:
+                continue
+            a, i = _union_counts(blo, bhi, m, prefix[v])
+            add_a += a - row_counts[v, 0]
+            add_i += i - row_counts[v, 1]
+        out[n, 0] = area0 + add_a
+        out[n, 1] = inter0 + add_i
 
 
 @njit(cache=True, inline="always")

@@ -30,6 +30,18 @@ _OTHER_CAPS = tuple(np.setdiff1d(_ALL_CAPS, caps) for caps in PART_CAPSULES)
 
 
 @dataclass
+class _FixedSpans:
+    """The row spans of every part but one (d_A alone, :func:`_raster.row_unions`)."""
+
+    lo: np.ndarray
+    hi: np.ndarray
+    n_row: np.ndarray
+    row_counts: np.ndarray
+    area: int
+    inter: int
+
+
+@dataclass
 class _Fixed:
     """The rendering of every part but one, over the whole image."""
 
@@ -55,6 +67,10 @@ class PartScorer:
       part's visible outline pixels are added (exact, since every part's outline depends
       only on its own capsules and the depth order; equal to a full render up to exact depth
       ties, which the full render breaks by capsule order).
+
+    With ``lambda_E`` 0, d_A alone needs no depth and no image: the other parts' union of
+    row spans is cached instead, and each sample's capsules are merged into the rows they
+    meet (the same pixels; profile of stage 3: a third of the time of the image path).
 
     The configuration is a set of part poses, not necessarily one connected skeleton: each
     part's capsules come from the ``joints`` array they were last set from.
@@ -92,6 +108,7 @@ class PartScorer:
         self.lambda_A = float(lambda_A)
         self.lambda_E = float(lambda_E)
         self._fixed: dict[int, _Fixed] = {}
+        self._spans: dict[int, _FixedSpans] = {}
         # the camera is fixed: its projection and radii are computed once, not per call
         self._rad_m = np.asarray(shape.radii, dtype=float)
         self._rad_px = self._rad_m * float(camera.scale)
@@ -107,6 +124,7 @@ class PartScorer:
         self._ends = pc.ends_px.copy()
         self._depth = pc.depth.copy()
         self._fixed.clear()
+        self._spans.clear()
 
     def update_part(self, part: int, joints: np.ndarray) -> None:
         """Move one part to its pose in ``joints`` (17, 3); the other parts stay."""
@@ -117,6 +135,7 @@ class PartScorer:
         self._ends[caps] = pc.ends_px[0, caps]
         self._depth[caps] = pc.depth[0, caps]
         self._fixed = {k: v for k, v in self._fixed.items() if k == p}
+        self._spans = {k: v for k, v in self._spans.items() if k == p}
 
     def _current(self) -> ProjectedCapsules:
         rm = np.asarray(self.shape.radii, dtype=float)
@@ -149,6 +168,22 @@ class PartScorer:
                 sum_edge=float(t.cost[edge].sum()),
             )
             self._fixed[part] = f
+        return f
+
+    def _spans_for(self, part: int) -> _FixedSpans:
+        f = self._spans.get(part)
+        if f is None:
+            caps = _OTHER_CAPS[part]
+            H = self.target.silhouette.shape[0]
+            lo = np.empty((H, len(caps)))
+            hi = np.empty((H, len(caps)))
+            n_row = np.zeros(H, dtype=np.int64)
+            row_counts = np.zeros((H, 2), dtype=np.int64)
+            area, inter = _raster.row_unions(
+                self._ends, self._rad_px, caps, self.target.prefix, lo, hi, n_row, row_counts
+            )
+            f = _FixedSpans(lo, hi, n_row, row_counts, int(area), int(inter))
+            self._spans[part] = f
         return f
 
     def render(self) -> Render:
@@ -187,7 +222,6 @@ class PartScorer:
         p = _check_part(part)
         j = _check_joints(joints_samples, "joints_samples", batch=True)
         caps = PART_CAPSULES[p]
-        fx = self._fixed_for(p)
         S = j.shape[0]
         # project only the moving part's capsules; other rows are never read by the kernel
         a = j[:, CAPSULE_A[caps], :]
@@ -200,10 +234,19 @@ class PartScorer:
             ends[:, caps] = self.camera.project(e3)
         else:
             ends[:, caps] = e3 @ self._A_T + self._c
+        t = self.target
+        if self.lambda_E == 0.0:
+            fs = self._spans_for(p)
+            counts = np.empty((S, 2), dtype=np.int64)
+            _raster.part_sil_counts(
+                ends, self._rad_px, caps, t.prefix, fs.lo, fs.hi, fs.n_row, fs.row_counts,
+                fs.area, fs.inter, counts,
+            )  # fmt: skip
+            return self.lambda_A * _d_A(counts[:, 0], counts[:, 1], t.area)
         depth[:, caps] = e3 @ self._view
+        fx = self._fixed_for(p)
         out_i = np.empty((S, 4), dtype=np.int64)
         out_f = np.empty((S, 2))
-        t = self.target
         _raster.part_counts(
             ends, depth, self._rad_px, self._rad_m, SEAM_END, caps,
             float(self.camera.scale), fx.flags, fx.z, t.cost, out_i, out_f,

@@ -59,10 +59,15 @@ def _refine(
     min_step = np.radians(s.refine_min_step_deg)
     # a step per part; without s.refine_per_part they all halve together (one shared step)
     steps = np.full(N_PARTS, step0)
+    # The (part, step) pairs that found nothing since ``cur`` last changed. Trying one again
+    # would score the same moves of the same posture and find nothing again, so it is skipped:
+    # the sweep that ends each step (no part improves) then scores only the parts before the
+    # previous sweep's last improvement. The result is the plain search's, for fewer scores.
+    stuck: set[tuple[int, float]] = set()
     for _ in range(s.refine_sweeps if sweeps is None else sweeps):
         improved = False
         for p in range(N_PARTS):
-            if steps[p] < min_step:
+            if steps[p] < min_step or (p, steps[p]) in stuck:
                 continue
             batch = _pattern_moves(
                 cur, p, steps[p], camera, in_plane=in_plane, alone=s.refine_alone,
@@ -72,7 +77,10 @@ def _refine(
             k = int(np.argmin(sc))
             if sc[k] < best - 1e-9 and limits_ok(batch[k]):
                 cur, best, improved = batch[k], float(sc[k]), True
-            elif s.refine_per_part:
+                stuck.clear()
+                continue
+            stuck.add((p, float(steps[p])))
+            if s.refine_per_part:
                 steps[p] /= 2.0  # this part is converged at this step
         if not s.refine_per_part and not improved:
             steps /= 2.0

@@ -291,6 +291,32 @@ def test_incremental_equals_d_S_batch_for_a_leaf(rng: np.random.Generator) -> No
     np.testing.assert_allclose(got, d_S_batch(samples, tgt, SHAPE, CAM), atol=1e-9)
 
 
+@pytest.mark.parametrize("part", range(N_PARTS))
+def test_incremental_d_A_counts_the_pixels_of_a_whole_render(
+    rng: np.random.Generator, part: int
+) -> None:
+    """Without d_E the part scorer merges row spans instead of rendering: its value must be
+    a whole render's, bit for bit, with parts overlapping, off-screen, cut by the image's
+    edge or unmoved."""
+    _, tgt = _target(rng)
+    base = _posture(rng)
+    samples = np.stack([_posture(rng, spread=1.2) for _ in range(10)])
+    samples[1] = base  # unmoved
+    samples[2, :, 0] += 5.0  # moving part off-screen
+    samples[3, :, 0] += 1.4  # cut by the image's edge
+    scorer = PartScorer(tgt, SHAPE, CAM, base, lambda_E=0.0)
+    got = scorer.score(part, samples)
+    for s in range(len(samples)):
+        whole = PartScorer(tgt, SHAPE, CAM, base, lambda_E=0.0)
+        whole.update_part(part, samples[s])
+        assert got[s] == whole.current_score(), s  # the image path's d_A, exactly
+    # and after a part moved, the cached spans of the others are not reused stale
+    scorer.update_part((part + 1) % N_PARTS, samples[4])
+    again = PartScorer(tgt, SHAPE, CAM, base, lambda_E=0.0)
+    again.update_part((part + 1) % N_PARTS, samples[4])
+    np.testing.assert_array_equal(scorer.score(part, samples), again.score(part, samples))
+
+
 def test_update_part_keeps_other_caches(rng: np.random.Generator) -> None:
     _, tgt = _target(rng)
     base = _posture(rng)

@@ -435,6 +435,51 @@ def test_refine_with_a_step_per_part_stops_converged_parts() -> None:
     assert out[True][2] < out[False][2], out  # fewer postures scored
 
 
+def _plain_pattern_search(scorer, joints, cam, s):  # noqa: ANN001, ANN202
+    """Thesis 6.4's pattern search written out, every part tried in every sweep."""
+    from engine.body.skeleton import N_PARTS
+    from engine.stages.candidates.refinement import _pattern_moves
+
+    cur, best = joints.copy(), float(scorer.full(joints[None])[0])
+    step = np.radians(s.refine_step0_deg)
+    for _ in range(s.refine_sweeps):
+        improved = False
+        for p in range(N_PARTS):
+            batch = _pattern_moves(cur, p, step, cam, in_plane=False, alone=False, move_root=True)
+            sc = scorer.full(batch)
+            k = int(np.argmin(sc))
+            if sc[k] < best - 1e-9 and limits_ok(batch[k]):
+                cur, best, improved = batch[k], float(sc[k]), True
+        if not improved:
+            step /= 2.0
+        if step < np.radians(s.refine_min_step_deg):
+            break
+    return cur, best
+
+
+@pytest.mark.parametrize("lambda_e", [0.0, 1.0])
+def test_refine_skips_only_the_moves_it_has_already_scored(lambda_e: float) -> None:
+    """A part that found nothing is not tried again at the same step until another part
+    moved: the result is the plain search's, for fewer scores."""
+    from engine.render.capsules import Target
+    from engine.stages.candidates.refinement import _refine
+    from engine.stages.candidates.scorer import _Scorer
+
+    truth = _posture(-30.0)
+    cam = _camera(truth)
+    r = render(truth, SHAPE, cam)
+    start = perturb_parts(truth, 8.0, np.random.default_rng(5))
+    s = replace(SMALL, refine_sweeps=14, refine_step0_deg=8.0, lambda_e=lambda_e)
+    plain = _Scorer(Target.from_masks(r.silhouette, r.edges), SHAPE, cam, start, s)
+    want = _plain_pattern_search(plain, start, cam, s)
+    scorer = _Scorer(Target.from_masks(r.silhouette, r.edges), SHAPE, cam, start, s)
+    got = _refine(scorer, start, cam, s)
+    np.testing.assert_array_equal(got[0], want[0])
+    assert got[1] == want[1]
+    assert want[1] < float(plain.full(start[None])[0])  # the search did move
+    assert scorer.n_evals < plain.n_evals, (scorer.n_evals, plain.n_evals)
+
+
 @pytest.mark.parametrize("estimator", ["bp", "hybrid"])
 def test_a_left_right_swapped_detection_gives_the_same_candidates(estimator):
     """Issue 20: the keypoint term reads the detection both ways, so a pose model that
