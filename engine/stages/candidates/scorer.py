@@ -70,9 +70,6 @@ class _Scorer:
             lam_a = 0.0
             if lam_e == 0.0:
                 return out
-        if lam_e == 0.0:  # d_A alone: counted from row spans, the same pixels as a render
-            # (profile of stage 3: a sixth of the time of the per-pixel depth render)
-            return out + lam_a * d_A_batch(postures, self.target, self.shape, self.camera)
         return out + d_S_batch(
             postures, self.target, self.shape, self.camera, lambda_A=lam_a, lambda_E=lam_e
         )

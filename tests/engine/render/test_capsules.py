@@ -194,6 +194,7 @@ def test_batch_equals_single_and_reference(rng: np.random.Generator) -> None:
     sils = silhouettes(J, SHAPE, CAM)
     dA = d_A_batch(J, tgt, SHAPE, CAM)
     dS = d_S_batch(J, tgt, SHAPE, CAM, lambda_A=0.7, lambda_E=1.3)
+    dS_no_edges = d_S_batch(J, tgt, SHAPE, CAM, lambda_A=0.7, lambda_E=0.0)  # from row spans
     for n in range(len(J)):
         r = render(J[n], SHAPE, CAM)
         np.testing.assert_array_equal(sils[n], r.silhouette)
@@ -202,6 +203,10 @@ def test_batch_equals_single_and_reference(rng: np.random.Generator) -> None:
             r.silhouette, r.edges, tgt.silhouette, tgt.edges, lambda_A=0.7, lambda_E=1.3
         )
         assert dS[n] == pytest.approx(ref, abs=1e-9)
+        ref = measures.d_S(
+            r.silhouette, r.edges, tgt.silhouette, tgt.edges, lambda_A=0.7, lambda_E=0.0
+        )
+        assert dS_no_edges[n] == pytest.approx(ref, abs=1e-12)
     assert dA[0] == 1.0
     for n in (1, 2):  # really cut by the border
         uv = CAM.project(J[n])
