@@ -122,6 +122,9 @@ class AnalysisFolder:
         result.json      the DESIGN.md result, present once the analysis is done
         provisional.json the same for the first whole segments only, with a "provisional"
                          entry (engine.provisional), written while stage 3 runs on the rest
+        provisional-claims/<k>  created (exclusively) by the process that computes the
+                         provisional result of k segments: two chunks that end together in
+                         two processes would both compute the same one
         framing.json     {"problems": [str]}: what the first frame says about the filming
                          (engine.stages.framing), written with stages 0-2's output
         cancel           marker: the analysis was cancelled (or failed for good): messages
@@ -156,6 +159,10 @@ class AnalysisFolder:
         self.heartbeat = self.work_dir / "heartbeat"
         self.stages = self.work_dir / "stages"
         self.prepared = self.stages / "prepare.npz"
+
+    def provisional_claim(self, segments: int) -> Path:
+        """The claim on computing the provisional result of ``segments`` segments."""
+        return self.work_dir / "provisional-claims" / str(int(segments))
 
     def video(self, suffix: str) -> Path:
         """Where the app stores the performer's video (``suffix`` like ``".mp4"``)."""

@@ -399,6 +399,22 @@ def _candidates(
     return out
 
 
+def _provisional_segments(paths: AnalysisFolder) -> int:
+    """How many segments the provisional result written so far covers (0: none)."""
+    old = read_json(paths.provisional)
+    return 0 if old is None else int(old["provisional"]["segments"])
+
+
+def _claim(path: Path) -> bool:
+    """Create ``path`` if no process has: True for the one process that did."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        path.touch(exist_ok=False)
+    except FileExistsError:
+        return False
+    return True
+
+
 #: A provisional result is worth its stage-4 run (about 0.5 s on P2) only when the final one is
 #: expected at least this many seconds later: a preview that the final result replaces within
 #: moments is work for nothing.
@@ -427,12 +443,12 @@ def write_provisional(
         k, n = engine_provisional.covered_segments(prepared, n_done)
         if paths.result.exists() or stage3_left_s(paths, prepared, n_chunks, chunks) < wait:
             return None
-        old = read_json(paths.provisional)
-        if k == 0 or (old is not None and old["provisional"]["segments"] >= k):
+        if k == 0 or _provisional_segments(paths) >= k or not _claim(paths.provisional_claim(k)):
             return None
         started = time.monotonic()
         doc = engine_provisional.select_provisional(prepared, chunks, settings)
-        if doc is None:
+        # another process may have written more segments meanwhile: never replace them
+        if doc is None or _provisional_segments(paths) >= k:
             return None
         doc.setdefault("analysis_id", job.analysis_id)
         write_json_atomic(paths.provisional, doc)

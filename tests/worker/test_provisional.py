@@ -89,3 +89,17 @@ def test_the_wait_left_counts_the_running_chunks(job) -> None:
         os.utime(ledger, (mtime, mtime))
     left = jobs.stage3_left_s(paths, prepared, 4, chunks)
     assert left == pytest.approx((sizes[2] + sizes[3]) * per_frame / 2, rel=0.05, abs=0.05)
+
+
+def test_a_preview_another_process_claimed_is_not_computed_twice(job) -> None:
+    """Two chunks that end together in two processes: the one that claimed the preview of
+    k segments computes it, the other does not compute it again."""
+    paths = AnalysisFolder(job.work_dir)
+    jobs.start(job)
+    jobs.run_prepare(job)
+    claim = paths.provisional_claim(1)
+    claim.parent.mkdir(parents=True)
+    claim.touch()  # the process that finished the other chunk is computing it
+    for i in range(3):  # chunk 1 completes the first segment (see the first test)
+        jobs.run_candidates(job, i, 4, provisional_min_wait_s=0.0)
+    assert not paths.provisional.exists()
