@@ -51,7 +51,7 @@ def sil_counts(ends: np.ndarray, rad: np.ndarray, prefix: np.ndarray, out: np.nd
                     )
                     if i0 <= i1:
                         m = _insert_span(lo, hi, m, i0, i1)
-            a, i = _union_counts(lo, hi, m, prefix[v])
+            a, i, _ = _union_counts(lo, hi, m, prefix[v])
             area += a
             inter += i
         out[n, 0] = area
@@ -59,25 +59,36 @@ def sil_counts(ends: np.ndarray, rad: np.ndarray, prefix: np.ndarray, out: np.nd
 
 
 @njit(cache=True, inline="always")
+def _merge_spans(lo: np.ndarray, hi: np.ndarray, m: int) -> int:
+    """Merge the first ``m`` column spans (sorted by start) in place into disjoint ones,
+    touching spans joined; returns how many are left."""
+    if m == 0:
+        return 0
+    k = 0
+    for j in range(1, m):
+        if lo[j] <= hi[k] + 1:
+            hi[k] = max(hi[k], hi[j])
+        else:
+            k += 1
+            lo[k] = lo[j]
+            hi[k] = hi[j]
+    return k + 1
+
+
+@njit(cache=True, inline="always")
 def _union_counts(lo: np.ndarray, hi: np.ndarray, m: int, pr: np.ndarray) -> tuple:
-    """Pixels of one row in the union of the first ``m`` column spans (sorted by start),
-    and how many of them are target pixels (``pr``: the row's prefix sums, (W + 1,))."""
+    """Pixels of one row in the union of the first ``m`` column spans (sorted by start;
+    merged in place), and how many of them are target pixels (``pr``: the row's prefix
+    sums, (W + 1,)). Returns (pixels, target pixels, spans left after merging)."""
+    m = _merge_spans(lo, hi, m)
     area = 0
     inter = 0
-    if m == 0:
-        return area, inter
-    s = int(lo[0])
-    t = int(hi[0])
-    for j in range(1, m + 1):
-        if j < m and lo[j] <= t + 1:
-            t = max(t, int(hi[j]))
-            continue
+    for j in range(m):
+        s = int(lo[j])
+        t = int(hi[j])
         area += t - s + 1
         inter += pr[t + 1] - pr[s]
-        if j < m:
-            s = int(lo[j])
-            t = int(hi[j])
-    return area, inter
+    return area, inter, m
 
 
 @njit(cache=True, nogil=True)
@@ -119,21 +130,12 @@ def row_unions(
         m = n_row[v]
         if m == 0:
             continue
-        a, i = _union_counts(lo[v], hi[v], m, prefix[v])
+        # the merged spans are kept: fewer to merge again per moving sample
+        a, i, n_row[v] = _union_counts(lo[v], hi[v], m, prefix[v])
         row_counts[v, 0] = a
         row_counts[v, 1] = i
         area += a
         inter += i
-        # keep the merged spans only: fewer to merge again per moving sample
-        k = 0
-        for j in range(1, m):
-            if lo[v, j] <= hi[v, k] + 1:
-                hi[v, k] = max(hi[v, k], hi[v, j])
-            else:
-                k += 1
-                lo[v, k] = lo[v, j]
-                hi[v, k] = hi[v, j]
-        n_row[v] = k + 1
     return area, inter
 
 
@@ -200,7 +202,7 @@ def part_sil_counts(
                         m = _insert_span(blo, bhi, m, i0, i1)
             if m == m0:
                 continue
-            a, i = _union_counts(blo, bhi, m, prefix[v])
+            a, i, _ = _union_counts(blo, bhi, m, prefix[v])
             add_a += a - row_counts[v, 0]
             add_i += i - row_counts[v, 1]
         out[n, 0] = area0 + add_a
